@@ -1,0 +1,78 @@
+"""chronogym: high-fidelity multibody simulations as Gymnasium environments, in parallel on Ray.
+
+Public names are imported lazily so that ``import chronogym`` stays light
+(no Ray, MuJoCo or PyChrono import); importing it registers the
+``chronogym/...`` Gymnasium ids.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0"
+
+_EXPORTS = {
+    "Task": "chronogym.task",
+    "FunctionTask": "chronogym.task",
+    "SimEnv": "chronogym.env",
+    "Advancer": "chronogym.advance",
+    "Synced": "chronogym.advance",
+    "advance_all": "chronogym.advance",
+    "MujocoTask": "chronogym.engines.mujoco",
+    "RayVectorEnv": "chronogym.vector.ray_vector_env",
+    "SerialVectorEnv": "chronogym.vector.serial",
+    "make_vec": "chronogym.vector.factory",
+    "register_task": "chronogym.registration",
+    "make_sim_env": "chronogym.registration",
+    "ChronogymError": "chronogym.errors",
+    "TaskDefinitionError": "chronogym.errors",
+    "WorkerCrashLoopError": "chronogym.errors",
+    "WorkerCallError": "chronogym.errors",
+}
+
+__all__ = [*sorted(_EXPORTS), "__version__"]
+
+if TYPE_CHECKING:
+    from chronogym.advance import Advancer, Synced, advance_all
+    from chronogym.engines.mujoco import MujocoTask
+    from chronogym.env import SimEnv
+    from chronogym.errors import (
+        ChronogymError,
+        TaskDefinitionError,
+        WorkerCallError,
+        WorkerCrashLoopError,
+    )
+    from chronogym.registration import make_sim_env, register_task
+    from chronogym.task import FunctionTask, Task
+    from chronogym.vector.factory import make_vec
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+    from chronogym.vector.serial import SerialVectorEnv
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'chronogym' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
+
+def _setup() -> None:
+    import os
+
+    # MuJoCo picks its GL backend when it is first imported; without a display,
+    # GLFW cannot render, so default to headless EGL (the user's choice wins).
+    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
+        os.environ["MUJOCO_GL"] = "egl"
+    from chronogym.registration import register_envs
+
+    register_envs()
+
+
+_setup()

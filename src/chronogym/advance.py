@@ -1,0 +1,131 @@
+"""The generic advance operator: one physics tick over heterogeneous advanceables.
+
+Advanceables do not share a method name, so each object is matched once, when
+the plan is compiled, against these shapes (first match wins):
+
+====  ==============================  =========================================
+ 1    ``Synced(obj, args_fn)``        ``obj.Synchronize(t, *args_fn(t))``; ``obj.Advance(dt)``
+ 2    ``(MjModel, MjData)`` pair      ``mujoco.mj_step(model, data)``
+ 3    has ``DoStepDynamics``          ``obj.DoStepDynamics(dt)`` (ChSystem, FSI systems)
+ 4    has ``Synchronize``+``Advance`` ``obj.Synchronize(t)``; ``obj.Advance(dt)``
+      (Chrono drivers, terrains)
+ 5    has ``Advance``                 ``obj.Advance(dt)``
+ 6    has ``Update``                  ``obj.Update()`` (Viper robot, sensor manager)
+ 7    callable                        ``fn(dt)``
+====  ==============================  =========================================
+
+A tick runs in two phases, as Chrono's own simulation loops do: first every
+``Synchronize`` in list order (all modules agree on time ``t`` and exchange
+inputs), then every step call (``mj_step``, ``DoStepDynamics``, ``Advance``,
+``Update``, callables) in list order. Put objects in the order their step
+calls must happen, e.g. ``[viper, system, sensor_manager]``.
+
+Nothing here imports PyChrono: Chrono objects are matched by duck typing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Synced:
+    """Wrap an object whose ``Synchronize`` needs more than the time.
+
+    ``args_fn(t)`` returns the extra arguments, e.g. for a Chrono vehicle
+    ``Synced(vehicle, lambda t: (driver.GetInputs(), terrain))``.
+    """
+
+    obj: Any
+    args_fn: Callable[[float], tuple[Any, ...]]
+
+
+def _is_mujoco_pair(obj: Any) -> bool:
+    return (
+        isinstance(obj, (tuple, list))
+        and len(obj) == 2
+        and type(obj[0]).__name__ == "MjModel"
+        and type(obj[1]).__name__ == "MjData"
+    )
+
+
+class Advancer:
+    """A compiled advance plan; call it once per physics tick with the tick's start time."""
+
+    def __init__(self, advanceables: Sequence[Any], dt: float) -> None:
+        if isinstance(advanceables, (str, bytes)) or not isinstance(advanceables, Sequence):
+            raise TypeError(f"advanceables={advanceables!r}: expected a list of objects to step")
+        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < float("inf"):
+            raise ValueError(f"dt={dt!r}: expected a finite float > 0")
+        self.dt = float(dt)
+        self._sync: list[Callable[[float], None]] = []
+        self._step: list[Callable[[], None]] = []
+        self.plan: list[str] = []
+        for index, obj in enumerate(advanceables):
+            self._add(index, obj)
+
+    def _add(self, index: int, obj: Any) -> None:
+        dt = self.dt
+        name = type(obj).__name__
+        if isinstance(obj, Synced):
+            sync, extra = obj.obj.Synchronize, obj.args_fn
+            self._sync.append(lambda t: sync(t, *extra(t)))
+            advance = obj.obj.Advance
+            self._step.append(lambda: advance(dt))
+            self.plan.append(f"{index}: {type(obj.obj).__name__}.Synchronize(t, *args) + Advance")
+        elif _is_mujoco_pair(obj):
+            import mujoco
+
+            model, data = obj
+            if abs(model.opt.timestep - dt) > 1e-12 * max(1.0, dt):
+                raise ValueError(
+                    f"advanceable {index}: MuJoCo model timestep {model.opt.timestep!r} "
+                    f"differs from dt={dt!r}; expected equal values (set model.opt.timestep)"
+                )
+            step = mujoco.mj_step
+            self._step.append(lambda: step(model, data))
+            self.plan.append(f"{index}: mujoco.mj_step")
+        elif hasattr(obj, "DoStepDynamics"):
+            do_step = obj.DoStepDynamics
+            if hasattr(obj, "Synchronize"):
+                self._sync.append(obj.Synchronize)
+            self._step.append(lambda: do_step(dt))
+            self.plan.append(f"{index}: {name}.DoStepDynamics")
+        elif hasattr(obj, "Synchronize") and hasattr(obj, "Advance"):
+            self._sync.append(obj.Synchronize)
+            advance = obj.Advance
+            self._step.append(lambda: advance(dt))
+            self.plan.append(f"{index}: {name}.Synchronize(t) + Advance")
+        elif hasattr(obj, "Advance"):
+            advance = obj.Advance
+            self._step.append(lambda: advance(dt))
+            self.plan.append(f"{index}: {name}.Advance")
+        elif hasattr(obj, "Update"):
+            self._step.append(obj.Update)
+            self.plan.append(f"{index}: {name}.Update")
+        elif callable(obj):
+            fn = obj
+            self._step.append(lambda: fn(dt))
+            self.plan.append(f"{index}: {getattr(obj, '__name__', name)}(dt)")
+        else:
+            raise TypeError(
+                f"advanceable {index} of type {name} has no way to be stepped; expected a "
+                "(MjModel, MjData) pair, an object with DoStepDynamics, Synchronize+Advance, "
+                "Advance or Update, a chronogym.Synced wrapper, or a callable fn(dt)"
+            )
+
+    def __call__(self, time: float) -> None:
+        for sync in self._sync:
+            sync(time)
+        for step in self._step:
+            step()
+
+
+def advance_all(advanceables: Sequence[Any], dt: float, time: float = 0.0) -> None:
+    """Advance every object by one tick of ``dt`` starting at ``time``.
+
+    Convenient for scripts; a loop should build one :class:`Advancer` and call it.
+    """
+    Advancer(advanceables, dt)(time)

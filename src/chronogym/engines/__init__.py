@@ -1,0 +1,1 @@
+"""Engine helpers. MuJoCo is the default engine; PyChrono is optional and never imported here."""

@@ -1,0 +1,101 @@
+"""MuJoCo helpers: a Task base class over one model/data pair."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from chronogym.task import Task
+
+
+def mujoco_diverged(data: Any) -> bool:
+    """True when MuJoCo flagged an unstable state or qpos/qvel hold NaN/Inf.
+
+    MuJoCo resets a diverged simulation to qpos0 by itself and only counts a
+    warning, so the warning counters are the reliable signal.
+    """
+    import mujoco
+
+    warnings = data.warning
+    for kind in (
+        mujoco.mjtWarning.mjWARN_BADQPOS,
+        mujoco.mjtWarning.mjWARN_BADQVEL,
+        mujoco.mjtWarning.mjWARN_BADQACC,
+    ):
+        if warnings[kind].number > 0:
+            return True
+    return not (np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all())
+
+
+class MujocoTask(Task):
+    """A Task over one MuJoCo model/data pair.
+
+    Subclasses implement ``load_model()`` (and usually ``setup()`` to define
+    spaces and look up ids), ``reset``, ``apply_action``, ``observe``,
+    ``reward`` and ``terminated``. When the subclass sets ``dt``, it becomes
+    ``model.opt.timestep``; otherwise ``dt`` is taken from the model.
+    Divergence detection and offscreen ``rgb_array`` rendering come for free
+    (rendering needs an OpenGL backend: ``MUJOCO_GL=egl`` or ``osmesa``).
+    """
+
+    dt: float | None = None  # type: ignore[assignment]
+    render_width: int = 480
+    render_height: int = 360
+    render_camera: str | int = -1
+
+    model: Any
+    data: Any
+
+    def load_model(self) -> Any:
+        """Return the ``mujoco.MjModel`` this task simulates."""
+        raise NotImplementedError(f"{type(self).__name__} must implement load_model()")
+
+    def setup(self) -> None:
+        """Hook run once after the model and data exist: spaces, ids, buffers."""
+
+    def init(self) -> None:
+        import mujoco
+
+        self.model = self.load_model()
+        if self.dt is None:
+            self.dt = float(self.model.opt.timestep)
+        else:
+            self.model.opt.timestep = self.dt
+        self.data = mujoco.MjData(self.model)
+        self.advanceables = [(self.model, self.data)]
+        self._renderer: Any = None
+        self.setup()
+
+    def reset_data(self, keyframe: int | str | None = None) -> None:
+        """Reset ``data`` to the model defaults or to a keyframe (index or name)."""
+        import mujoco
+
+        if keyframe is None:
+            mujoco.mj_resetData(self.model, self.data)
+        else:
+            key = keyframe if isinstance(keyframe, int) else self.model.key(keyframe).id
+            mujoco.mj_resetDataKeyframe(self.model, self.data, key)
+
+    def forward(self) -> None:
+        """Recompute derived quantities (positions, sensors) after editing qpos/qvel."""
+        import mujoco
+
+        mujoco.mj_forward(self.model, self.data)
+
+    def diverged(self) -> bool:
+        return mujoco_diverged(self.data)
+
+    def render(self) -> np.ndarray:
+        if self._renderer is None:
+            import mujoco
+
+            self._renderer = mujoco.Renderer(self.model, self.render_height, self.render_width)
+        self._renderer.update_scene(self.data, camera=self.render_camera)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        renderer = getattr(self, "_renderer", None)
+        if renderer is not None:
+            renderer.close()
+            self._renderer = None

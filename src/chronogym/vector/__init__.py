@@ -1,0 +1,1 @@
+"""Vector envs: RayVectorEnv (Ray actors) and SerialVectorEnv (in process), same semantics."""

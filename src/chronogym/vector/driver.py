@@ -1,0 +1,384 @@
+"""The driver side of chronogym's vector envs, shared by the Ray and the serial backends.
+
+The driver splits the batched action into one slice per worker, issues every
+worker's call, then waits once (one barrier per vector step) and joins the
+results. Each worker is an :class:`~chronogym.vector.group.EnvGroup` holding
+``envs_per_worker`` environments. A worker that dies (or whose call fails) is
+replaced: its environments are rebuilt, get fresh deterministic seeds, and are
+reported as truncated with ``info["worker_restarted"] = True``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from chronogym.actions import check_invalid_action_mode, prepare_action
+from chronogym.errors import WorkerCallError, WorkerCrashLoopError
+from chronogym.seeding import restart_seed, vector_seeds
+from chronogym.vector.batching import concat_batches, slice_batch
+from chronogym.vector.group import DisabledAutoresetError, EnvFactory, Restart
+
+logger = logging.getLogger("chronogym")
+
+
+@dataclass
+class Outcome:
+    """What one worker call gave back: a value, or the error that replaced it."""
+
+    ok: bool
+    value: Any = None
+    error: str = ""
+    lost: bool = False  # the worker process is gone or stopped answering
+
+
+class Backend(Protocol):
+    """Where EnvGroups live: in this process, or in Ray actors."""
+
+    def start(self, group_kwargs: list[dict[str, Any]]) -> None: ...
+    def replace(self, worker: int, kwargs: dict[str, Any]) -> None: ...
+    def submit(self, worker: int, method: str, *args: Any) -> Any: ...
+    def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]: ...
+    def pid(self, worker: int) -> int: ...
+    def shutdown(self) -> None: ...
+
+
+def normalize_env_fns(
+    env_fns: str | EnvFactory | Sequence[str | EnvFactory], num_envs: int | None
+) -> list[str | EnvFactory]:
+    """One factory (or registered id) per env, from the forms Gymnasium users know."""
+    if isinstance(env_fns, str) or callable(env_fns):
+        if num_envs is None:
+            raise ValueError("num_envs is required when a single env id or factory is given")
+        count = num_envs
+        fns: list[str | EnvFactory] = [env_fns] * max(count, 0)  # type: ignore[list-item]
+    elif isinstance(env_fns, Sequence):
+        fns = list(env_fns)
+        count = len(fns) if num_envs is None else num_envs
+        if num_envs is not None and num_envs != len(fns):
+            raise ValueError(f"num_envs={num_envs} but {len(fns)} env factories were given")
+        for i, fn in enumerate(fns):
+            if not (isinstance(fn, str) or callable(fn)):
+                raise TypeError(f"env_fns[{i}]={fn!r}: expected a callable or an env id string")
+    else:
+        raise TypeError(
+            f"env_fns={env_fns!r}: expected an env id, a factory, or a list of factories"
+        )
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"num_envs={count!r}: expected an integer >= 1")
+    return fns
+
+
+def check_envs_per_worker(envs_per_worker: int, num_envs: int) -> int:
+    """Validate ``envs_per_worker`` against ``num_envs``."""
+    if (
+        isinstance(envs_per_worker, bool)
+        or not isinstance(envs_per_worker, (int, np.integer))
+        or envs_per_worker < 1
+    ):
+        raise ValueError(f"envs_per_worker={envs_per_worker!r}: expected an integer >= 1")
+    if envs_per_worker > num_envs:
+        raise ValueError(
+            f"envs_per_worker={envs_per_worker} is larger than num_envs={num_envs}; "
+            f"expected 1 <= envs_per_worker <= {num_envs}"
+        )
+    return int(envs_per_worker)
+
+
+class WorkerVectorEnv(VectorEnv):
+    """A ``gymnasium.vector.VectorEnv`` whose environments live in EnvGroup workers."""
+
+    def __init__(
+        self,
+        env_fns: str | EnvFactory | Sequence[str | EnvFactory],
+        num_envs: int | None,
+        *,
+        backend: Backend,
+        envs_per_worker: int,
+        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+        max_restarts: int = 3,
+        invalid_action: str = "raise",
+        env_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        fns = normalize_env_fns(env_fns, num_envs)
+        self.num_envs = len(fns)
+        self.envs_per_worker = check_envs_per_worker(envs_per_worker, self.num_envs)
+        self.autoreset_mode = AutoresetMode(autoreset_mode)
+        check_invalid_action_mode(invalid_action)
+        if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < -1:
+            raise ValueError(
+                f"max_restarts={max_restarts!r}: expected an integer >= 0, or -1 for no limit"
+            )
+        self.max_restarts = max_restarts
+        self.invalid_action = invalid_action
+        self.closed = False
+        self._backend = backend
+        m = self.envs_per_worker
+        self._slices = [(lo, min(lo + m, self.num_envs)) for lo in range(0, self.num_envs, m)]
+        self.num_workers = len(self._slices)
+        self._env_fns = fns
+        self._env_kwargs = env_kwargs
+        self._seed_roots = [int(np.random.SeedSequence().generate_state(1)[0])] * self.num_envs
+        self._restart_counts = [0] * self.num_envs
+        self.restarts: list[tuple[int, str]] = []
+        self._started = False
+        backend.start([self._group_kwargs(w) for w in range(self.num_workers)])
+        self._started = True
+        obs_space, act_space, metadata, render_mode = self._call_one(0, "spaces")
+        self.single_observation_space = obs_space
+        self.single_action_space = act_space
+        self.observation_space = batch_space(obs_space, self.num_envs)
+        self.action_space = batch_space(act_space, self.num_envs)
+        self.metadata = {**metadata, "autoreset_mode": self.autoreset_mode}
+        self.render_mode = render_mode
+        self._last_parts: list[Any] = [None] * self.num_workers
+
+    # -- workers -----------------------------------------------------------------------
+    def _group_kwargs(self, w: int) -> dict[str, Any]:
+        lo, hi = self._slices[w]
+        return {
+            "env_fns": self._env_fns[lo:hi],
+            "indices": list(range(lo, hi)),
+            "autoreset_mode": self.autoreset_mode,
+            "seed_roots": self._seed_roots[lo:hi],
+            "restart_counts": self._restart_counts[lo:hi],
+            "env_kwargs": self._env_kwargs,
+        }
+
+    def _call_one(self, w: int, method: str, *args: Any) -> Any:
+        (outcome,) = self._backend.gather([w], [self._backend.submit(w, method, *args)])
+        if not outcome.ok:
+            raise WorkerCallError(f"worker {w} failed in {method}():\n{outcome.error}")
+        return outcome.value
+
+    def _call_all(self, workers: list[int], method: str, args: list[tuple[Any, ...]]) -> list:
+        handles = [self._backend.submit(w, method, *a) for w, a in zip(workers, args, strict=True)]
+        return self._backend.gather(workers, handles)
+
+    def _count_restart(self, env_index: int, error: str) -> None:
+        self._restart_counts[env_index] += 1
+        self.restarts.append((env_index, error))
+        if self.max_restarts >= 0 and self._restart_counts[env_index] > self.max_restarts:
+            raise WorkerCrashLoopError(
+                f"env {env_index} failed {self._restart_counts[env_index]} times, more than "
+                f"max_restarts={self.max_restarts}; last error:\n{error}"
+            )
+
+    def _note_restarts(self, restarts: list[Restart]) -> None:
+        for restart in restarts:
+            logger.warning(
+                "chronogym: env %d raised and was rebuilt:\n%s", restart.env_index, restart.error
+            )
+            self._count_restart(restart.env_index, restart.error)
+
+    def _replace_worker(self, w: int, error: str) -> list[int]:
+        """Replace a failed worker; return the fresh seeds of its envs."""
+        lo, hi = self._slices[w]
+        logger.warning("chronogym: worker %d (envs %d..%d) replaced:\n%s", w, lo, hi - 1, error)
+        for i in range(lo, hi):
+            self._count_restart(i, error)
+        self._backend.replace(w, self._group_kwargs(w))
+        roots, counts = self._seed_roots, self._restart_counts
+        return [restart_seed(roots[i], i, counts[i]) for i in range(lo, hi)]
+
+    def worker_pids(self) -> list[int]:
+        """Process id of each worker (for monitoring and fault-injection tests)."""
+        return [self._backend.pid(w) for w in range(self.num_workers)]
+
+    # -- reset -------------------------------------------------------------------------
+    def reset(
+        self,
+        *,
+        seed: int | list[int | None] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> tuple[Any, dict[str, Any]]:
+        self._check_open()
+        seeds = vector_seeds(seed, self.num_envs)
+        mask = None
+        if options is not None and "reset_mask" in options:
+            options = dict(options)
+            mask = _check_reset_mask(options.pop("reset_mask"), self.num_envs)
+        for i, s in enumerate(seeds):
+            if s is not None and (mask is None or mask[i]):
+                self._seed_roots[i] = s
+        workers = [
+            w for w, (lo, hi) in enumerate(self._slices) if mask is None or mask[lo:hi].any()
+        ]
+        infos_per_env: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        pending = workers
+        while pending:
+            args = [self._reset_args(w, seeds, options, mask) for w in pending]
+            outcomes = self._call_all(pending, "reset", args)
+            failed = []
+            for w, outcome in zip(pending, outcomes, strict=True):
+                if outcome.ok:
+                    part, infos, restarts = outcome.value
+                    self._note_restarts(restarts)
+                    self._last_parts[w] = part
+                    lo, _ = self._slices[w]
+                    for j, info in enumerate(infos):
+                        infos_per_env[lo + j] = info
+                else:
+                    self._replace_worker(w, outcome.error)
+                    failed.append(w)
+            pending = failed
+        return self._join_obs(), self._join_infos(infos_per_env)
+
+    def _reset_args(self, w: int, seeds: list, options: Any, mask: np.ndarray | None) -> tuple:
+        lo, hi = self._slices[w]
+        return (seeds[lo:hi], options, None if mask is None else mask[lo:hi].tolist())
+
+    # -- step --------------------------------------------------------------------------
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
+        self._check_open()
+        if self._last_parts[0] is None:
+            raise RuntimeError("step() called before reset(); call reset() first")
+        actions = prepare_action(
+            actions, self.single_action_space, self.num_envs, self.invalid_action
+        )
+        workers = list(range(self.num_workers))
+        args = [(slice_batch(actions, lo, hi),) for lo, hi in self._slices]
+        outcomes = self._call_all(workers, "step", args)
+        rewards = np.zeros(self.num_envs, dtype=np.float64)
+        terminations = np.zeros(self.num_envs, dtype=np.bool_)
+        truncations = np.zeros(self.num_envs, dtype=np.bool_)
+        infos_per_env: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        for w, outcome in enumerate(outcomes):
+            lo, hi = self._slices[w]
+            if outcome.ok:
+                part, rew, term, trunc, infos, restarts = outcome.value
+                self._note_restarts(restarts)
+            else:
+                if isinstance(outcome.value, DisabledAutoresetError):
+                    raise outcome.value
+                part, infos = self._restart_during_step(w, outcome.error)
+                rew, term, trunc = 0.0, False, True
+            self._last_parts[w] = part
+            rewards[lo:hi], terminations[lo:hi], truncations[lo:hi] = rew, term, trunc
+            infos_per_env[lo:hi] = infos
+        return (
+            self._join_obs(),
+            rewards,
+            terminations,
+            truncations,
+            self._join_infos(infos_per_env),
+        )
+
+    def _restart_during_step(self, w: int, error: str) -> tuple[Any, list[dict[str, Any]]]:
+        lo, hi = self._slices[w]
+        last_part = self._last_parts[w]
+        last_rows = [_row_of(last_part, j) for j in range(hi - lo)]
+        seeds = self._replace_worker(w, error)
+        flags = {"worker_restarted": True, "worker_error": error}
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            part, infos, restarts = self._call_one(w, "reset_restarted", seeds, last_rows)
+            self._note_restarts(restarts)
+            return part, [{**info, **flags} for info in infos]
+        self._call_one(w, "mark_restarted", seeds, last_rows)
+        return last_part, [dict(flags) for _ in range(hi - lo)]
+
+    # -- joining -----------------------------------------------------------------------
+    def _join_obs(self) -> Any:
+        return concat_batches(self.single_observation_space, self._last_parts)
+
+    def _join_infos(self, infos_per_env: list[dict[str, Any]]) -> dict[str, Any]:
+        infos: dict[str, Any] = {}
+        for i, info in enumerate(infos_per_env):
+            if info:
+                infos = self._add_info(infos, info, i)
+        return infos
+
+    # -- generic access ----------------------------------------------------------------
+    def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
+        """Call ``name`` on every env (or read it, if not callable); results in env order."""
+        self._check_open()
+        workers = list(range(self.num_workers))
+        outcomes = self._call_all(workers, "call", [(name, args, kwargs)] * self.num_workers)
+        return tuple(item for w in workers for item in self._unwrap(w, outcomes[w], name))
+
+    def get_attr(self, name: str) -> tuple[Any, ...]:
+        """The attribute ``name`` of every env, in env order."""
+        return self.call(name)
+
+    def set_attr(self, name: str, values: list[Any] | tuple[Any, ...] | Any) -> None:
+        """Set ``name`` on every env: one value for all, or a list with one per env."""
+        self._check_open()
+        if not isinstance(values, (list, tuple)):
+            values = [values] * self.num_envs
+        if len(values) != self.num_envs:
+            raise ValueError(
+                f"set_attr got {len(values)} values; expected one value or a list of "
+                f"num_envs={self.num_envs} values"
+            )
+        workers = list(range(self.num_workers))
+        args = [(name, list(values[lo:hi])) for lo, hi in self._slices]
+        for w, outcome in zip(workers, self._call_all(workers, "set_attr", args), strict=True):
+            self._unwrap(w, outcome, name)
+
+    def _unwrap(self, w: int, outcome: Outcome, name: str) -> Any:
+        if outcome.ok:
+            return outcome.value
+        if outcome.lost:
+            self._replace_worker(w, outcome.error)
+            lo, hi = self._slices[w]
+            raise WorkerCallError(
+                f"worker {w} (envs {lo}..{hi - 1}) was lost during {name!r}; it was replaced, "
+                f"and its envs need reset():\n{outcome.error}"
+            )
+        raise outcome.value
+
+    def render(self) -> tuple[Any, ...] | None:
+        """Frames of every env (``render_mode='rgb_array'``)."""
+        return self.call("render")
+
+    # -- closing -----------------------------------------------------------------------
+    def close_extras(self, **kwargs: Any) -> None:
+        if not self._started:
+            return
+        try:
+            workers = list(range(self.num_workers))
+            self._call_all(workers, "close", [()] * self.num_workers)
+        finally:
+            self._backend.shutdown()
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise RuntimeError(f"{type(self).__name__} is closed; create a new one")
+
+    def __del__(self) -> None:
+        try:
+            if not getattr(self, "closed", True):
+                self.close()
+        except Exception:
+            pass
+
+
+def _row_of(part: Any, j: int) -> Any:
+    """Row ``j`` of a batch, copied (dict and tuple batches of arrays recurse)."""
+    if isinstance(part, dict):
+        return {key: _row_of(value, j) for key, value in part.items()}
+    if isinstance(part, tuple) and part and all(isinstance(v, np.ndarray) for v in part):
+        return tuple(_row_of(value, j) for value in part)
+    if isinstance(part, np.ndarray):
+        return np.array(part[j], copy=True)
+    return part[j]
+
+
+def _check_reset_mask(reset_mask: Any, num_envs: int) -> np.ndarray:
+    if not isinstance(reset_mask, np.ndarray):
+        raise TypeError(f"options['reset_mask'] must be a numpy array, got {type(reset_mask)}")
+    if reset_mask.shape != (num_envs,):
+        raise ValueError(
+            f"options['reset_mask'] has shape {reset_mask.shape}; expected ({num_envs},)"
+        )
+    if reset_mask.dtype != np.bool_:
+        raise TypeError(f"options['reset_mask'] has dtype {reset_mask.dtype}; expected bool")
+    if not reset_mask.any():
+        raise ValueError("options['reset_mask'] must contain at least one True value")
+    return reset_mask

@@ -1,0 +1,226 @@
+"""EnvGroup: several environments stepped in one process with Gymnasium's autoreset rules.
+
+The same class runs inside every Ray worker and inside SerialVectorEnv, so the
+two give identical numbers. It mirrors ``gymnasium.vector.SyncVectorEnv`` step
+for step and adds one thing: an environment whose step or reset raises is
+rebuilt, reseeded with a fresh deterministic seed, and reported as truncated
+with ``info["worker_restarted"] = True`` and the traceback in
+``info["worker_error"]``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import concatenate, create_empty_array
+
+from chronogym.seeding import restart_seed
+
+EnvFactory = Callable[[], gym.Env]
+
+
+def build_env(env_fn: EnvFactory | str, env_kwargs: dict[str, Any] | None = None) -> gym.Env:
+    """Create one env from a factory or a registered id (importing chronogym registers ours)."""
+    if isinstance(env_fn, str):
+        import chronogym  # noqa: F401  (registers the chronogym/... ids)
+
+        return gym.make(env_fn, **(env_kwargs or {}))
+    return env_fn()
+
+
+@dataclass
+class Restart:
+    """An env rebuilt inside its worker after its step or reset raised."""
+
+    env_index: int
+    error: str
+
+
+class EnvGroup:
+    """Environments ``indices`` of a vector env, owned by one process."""
+
+    def __init__(
+        self,
+        env_fns: Sequence[EnvFactory | str],
+        indices: Sequence[int],
+        autoreset_mode: AutoresetMode,
+        seed_roots: Sequence[int],
+        restart_counts: Sequence[int] | None = None,
+        env_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        if len(env_fns) != len(indices):
+            raise ValueError(f"{len(env_fns)} env factories for {len(indices)} env indices")
+        self.env_fns = list(env_fns)
+        self.env_kwargs = env_kwargs
+        self.indices = list(indices)
+        self.autoreset_mode = AutoresetMode(autoreset_mode)
+        self.envs = [build_env(fn, env_kwargs) for fn in self.env_fns]
+        n = len(self.envs)
+        self.single_observation_space = self.envs[0].observation_space
+        self.single_action_space = self.envs[0].action_space
+        self.seed_roots = list(seed_roots)
+        self.restart_counts = list(restart_counts) if restart_counts else [0] * n
+        self.pending_seeds: list[int | None] = [None] * n
+        self.autoreset = np.zeros(n, dtype=np.bool_)
+        self.last_obs: list[Any] = [None] * n
+
+    # -- introspection -----------------------------------------------------------------
+    def spaces(self) -> tuple[gym.Space, gym.Space, dict[str, Any], str | None]:
+        env = self.envs[0]
+        return env.observation_space, env.action_space, dict(env.metadata), env.render_mode
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def ready(self) -> bool:
+        return True
+
+    # -- restarts ----------------------------------------------------------------------
+    def _rebuild(self, j: int) -> int:
+        with contextlib.suppress(Exception):  # a broken env may fail to close
+            self.envs[j].close()
+        self.envs[j] = build_env(self.env_fns[j], self.env_kwargs)
+        self.restart_counts[j] += 1
+        return restart_seed(self.seed_roots[j], self.indices[j], self.restart_counts[j])
+
+    def mark_restarted(self, seeds: Sequence[int], last_obs: Sequence[Any]) -> None:
+        """After the whole process was replaced: the next reset of each env uses ``seeds``."""
+        self.pending_seeds = list(seeds)
+        self.last_obs = list(last_obs)
+        self.autoreset[:] = True
+
+    def reset_restarted(
+        self, seeds: Sequence[int], last_obs: Sequence[Any]
+    ) -> tuple[Any, list[dict[str, Any]], list[Restart]]:
+        """After the whole process was replaced (SAME_STEP): reset now with ``seeds``."""
+        self.pending_seeds = list(seeds)
+        part, infos, restarts = self.reset([None] * len(self.envs), None)
+        for j, info in enumerate(infos):
+            infos[j] = {"final_obs": last_obs[j], "final_info": {}, **info}
+        return part, infos, restarts
+
+    # -- reset / step ------------------------------------------------------------------
+    def _batch(self, items: list[Any]) -> Any:
+        out = create_empty_array(self.single_observation_space, n=len(items), fn=np.zeros)
+        return concatenate(self.single_observation_space, items, out)
+
+    def _reset_one(self, j: int, seed: int | None, options: dict[str, Any] | None):
+        """Reset env j; a user seed becomes its restart-seed root, a pending restart seed not."""
+        if seed is not None:
+            self.seed_roots[j] = seed
+        elif self.pending_seeds[j] is not None:
+            seed = self.pending_seeds[j]
+        self.pending_seeds[j] = None
+        return self.envs[j].reset(seed=seed, options=options)
+
+    def reset(
+        self,
+        seeds: Sequence[int | None],
+        options: dict[str, Any] | None,
+        mask: Sequence[bool] | None = None,
+    ) -> tuple[Any, list[dict[str, Any]], list[Restart]]:
+        """Reset the envs (those where ``mask`` is True); return batch obs, infos, restarts."""
+        infos: list[dict[str, Any]] = [{} for _ in self.envs]
+        restarts: list[Restart] = []
+        for j in range(len(self.envs)):
+            if mask is not None and not mask[j]:
+                continue
+            self.autoreset[j] = False
+            try:
+                obs, info = self._reset_one(j, seeds[j], options)
+            except Exception:
+                restarts.append(Restart(self.indices[j], traceback.format_exc()))
+                self._rebuild(j)
+                obs, info = self._reset_one(j, seeds[j], options)
+            self.last_obs[j] = obs
+            infos[j] = info
+        return self._batch(self.last_obs), infos, restarts
+
+    def step(
+        self, actions: Any
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]], list[Restart]]:
+        """Step every env with its row of ``actions``, autoresetting as Gymnasium does."""
+        n = len(self.envs)
+        rewards = np.zeros(n, dtype=np.float64)
+        terminations = np.zeros(n, dtype=np.bool_)
+        truncations = np.zeros(n, dtype=np.bool_)
+        infos: list[dict[str, Any]] = [{} for _ in range(n)]
+        restarts: list[Restart] = []
+        mode = self.autoreset_mode
+        for j, env in enumerate(self.envs):
+            action = _row(actions, j)
+            try:
+                if mode == AutoresetMode.NEXT_STEP and self.autoreset[j]:
+                    obs, info = self._reset_one(j, None, None)
+                else:
+                    if mode == AutoresetMode.DISABLED and self.autoreset[j]:
+                        raise_disabled(self.indices[j])
+                    obs, rewards[j], terminations[j], truncations[j], info = env.step(action)
+                    if mode == AutoresetMode.SAME_STEP and (terminations[j] or truncations[j]):
+                        final = {"final_obs": obs, "final_info": info}
+                        obs, reset_info = self._reset_one(j, None, None)
+                        info = {**final, **reset_info}
+            except DisabledAutoresetError:
+                raise
+            except Exception:
+                error = traceback.format_exc()
+                restarts.append(Restart(self.indices[j], error))
+                obs, info = self._restart_in_step(j)
+                rewards[j], terminations[j], truncations[j] = 0.0, False, True
+                info.update(worker_restarted=True, worker_error=error)
+            self.last_obs[j] = obs
+            infos[j] = info
+        self.autoreset = np.logical_or(terminations, truncations)
+        return self._batch(self.last_obs), rewards, terminations, truncations, infos, restarts
+
+    def _restart_in_step(self, j: int) -> tuple[Any, dict[str, Any]]:
+        final_obs = self.last_obs[j]
+        seed = self._rebuild(j)
+        self.pending_seeds[j] = seed
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            obs, reset_info = self._reset_one(j, None, None)
+            return obs, {"final_obs": final_obs, "final_info": {}, **reset_info}
+        return final_obs, {}
+
+    # -- generic access ----------------------------------------------------------------
+    def call(self, name: str, args: tuple[Any, ...], kwargs: dict[str, Any]) -> list[Any]:
+        results = []
+        for env in self.envs:
+            attr = env.get_wrapper_attr(name)
+            results.append(attr(*args, **kwargs) if callable(attr) else attr)
+        return results
+
+    def set_attr(self, name: str, values: Sequence[Any]) -> None:
+        for env, value in zip(self.envs, values, strict=True):
+            env.set_wrapper_attr(name, value)
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+class DisabledAutoresetError(RuntimeError):
+    """Stepping an env that ended while autoreset is DISABLED."""
+
+
+def raise_disabled(env_index: int) -> None:
+    raise DisabledAutoresetError(
+        f"env {env_index} ended and autoreset_mode is DISABLED; reset it with "
+        "reset(options={'reset_mask': mask}) before stepping it again"
+    )
+
+
+def _row(actions: Any, j: int) -> Any:
+    if isinstance(actions, dict):
+        return {key: _row(value, j) for key, value in actions.items()}
+    if isinstance(actions, tuple):
+        return tuple(_row(value, j) for value in actions)
+    return actions[j]

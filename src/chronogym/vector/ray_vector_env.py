@@ -1,0 +1,93 @@
+"""RayVectorEnv: a Gymnasium vector env whose simulations live in Ray actors."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from gymnasium.vector import AutoresetMode
+
+from chronogym.vector.driver import WorkerVectorEnv, normalize_env_fns
+from chronogym.vector.group import EnvFactory
+from chronogym.vector.ray_backend import (
+    RayBackend,
+    check_worker_gpus,
+    cluster_cpus,
+    ensure_ray,
+    resolve_worker_cpus,
+)
+
+
+class RayVectorEnv(WorkerVectorEnv):
+    """A drop-in ``gymnasium.vector.VectorEnv`` running its envs in Ray actors.
+
+    Args:
+        env_fns: a registered env id, one env factory, or a list of factories
+            (one per env, as for ``SyncVectorEnv``).
+        num_envs: number of envs (required with an id or a single factory).
+        envs_per_worker: simulations per actor; one remote call steps them all.
+            Default: spread the envs over the cluster's CPUs
+            (``ceil(num_envs / CPUs)``).
+        num_cpus, num_gpus: resources per actor (fractions allowed). Default
+            ``num_cpus``: the cluster's CPUs shared evenly, at most 1 each.
+        address: Ray cluster address; default ``RAY_ADDRESS``, else a local
+            cluster is started (no dashboard).
+        autoreset_mode: Gymnasium's ``AutoresetMode`` (NEXT_STEP default).
+        max_restarts: restarts allowed per env before WorkerCrashLoopError
+            (-1: no limit).
+        invalid_action: ``"raise"`` (default) or ``"clip"`` for NaN/Inf actions.
+        step_timeout: seconds a worker may take for one call before it is
+            treated as lost and replaced (default: wait forever).
+        env_kwargs: keyword arguments for ``gymnasium.make`` when ``env_fns``
+            is an id.
+    """
+
+    def __init__(
+        self,
+        env_fns: str | EnvFactory | Sequence[str | EnvFactory],
+        num_envs: int | None = None,
+        *,
+        envs_per_worker: int | None = None,
+        num_cpus: float | None = None,
+        num_gpus: float = 0,
+        address: str | None = None,
+        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+        max_restarts: int = 3,
+        invalid_action: str = "raise",
+        step_timeout: float | None = None,
+        start_timeout: float = 120.0,
+        env_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        count = len(normalize_env_fns(env_fns, num_envs))
+        if envs_per_worker is not None and (
+            isinstance(envs_per_worker, bool)
+            or not isinstance(envs_per_worker, int)
+            or not 1 <= envs_per_worker <= count
+        ):
+            raise ValueError(
+                f"envs_per_worker={envs_per_worker!r}: expected an integer with "
+                f"1 <= envs_per_worker <= num_envs={count}"
+            )
+        if step_timeout is not None and not step_timeout > 0:
+            raise ValueError(f"step_timeout={step_timeout!r}: expected None or seconds > 0")
+        ensure_ray(address)
+        if envs_per_worker is None:
+            cpus = max(1, int(cluster_cpus()))
+            envs_per_worker = math.ceil(count / cpus)
+        num_workers = math.ceil(count / envs_per_worker)
+        self.num_cpus_per_worker = resolve_worker_cpus(num_cpus, num_workers)
+        self.num_gpus_per_worker = check_worker_gpus(num_gpus, num_workers)
+        backend = RayBackend(
+            self.num_cpus_per_worker, self.num_gpus_per_worker, start_timeout, step_timeout
+        )
+        super().__init__(
+            env_fns,
+            num_envs,
+            backend=backend,
+            envs_per_worker=envs_per_worker,
+            autoreset_mode=autoreset_mode,
+            max_restarts=max_restarts,
+            invalid_action=invalid_action,
+            env_kwargs=env_kwargs,
+        )
