@@ -2,11 +2,32 @@
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
 
 from chronogym.task import Task
+
+
+def check_headless_gl() -> None:
+    """Raise a clear error when MuJoCo chose GLFW (needs a display) and there is none.
+
+    MuJoCo picks its GL backend once, at ``import mujoco``: ``import chronogym``
+    first (it defaults ``MUJOCO_GL`` to ``egl`` when there is no display), or set
+    ``MUJOCO_GL=egl`` / ``osmesa`` yourself.
+    """
+    from mujoco.rendering.classic import gl_context
+
+    backend = getattr(gl_context, "_MUJOCO_GL", "")
+    if backend in ("", "glfw", "enable", "enabled", "on", "true", "1") and not os.environ.get(
+        "DISPLAY"
+    ):
+        raise RuntimeError(
+            f"MuJoCo uses the GLFW backend (MUJOCO_GL={backend!r}) but there is no display; "
+            "expected MUJOCO_GL=egl or osmesa set before mujoco is first imported "
+            "(importing chronogym before mujoco does this)"
+        )
 
 
 def mujoco_diverged(data: Any) -> bool:
@@ -90,6 +111,7 @@ class MujocoTask(Task):
         if self._renderer is None:
             import mujoco
 
+            check_headless_gl()
             self._renderer = mujoco.Renderer(self.model, self.render_height, self.render_width)
         self._renderer.update_scene(self.data, camera=self.render_camera)
         return self._renderer.render()

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
@@ -138,6 +139,7 @@ class WorkerVectorEnv(VectorEnv):
         self.metadata = {**metadata, "autoreset_mode": self.autoreset_mode}
         self.render_mode = render_mode
         self._last_parts: list[Any] = [None] * self.num_workers
+        self._packed = isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
 
     # -- workers -----------------------------------------------------------------------
     def _group_kwargs(self, w: int) -> dict[str, Any]:
@@ -243,8 +245,14 @@ class WorkerVectorEnv(VectorEnv):
             actions, self.single_action_space, self.num_envs, self.invalid_action
         )
         workers = list(range(self.num_workers))
-        args = [(slice_batch(actions, lo, hi),) for lo, hi in self._slices]
-        outcomes = self._call_all(workers, "step", args)
+        if self._packed:
+            data = actions.tobytes()
+            row = len(data) // self.num_envs
+            args = [(data[lo * row : hi * row],) for lo, hi in self._slices]
+            outcomes = self._call_all(workers, "step_packed", args)
+        else:
+            args = [(slice_batch(actions, lo, hi),) for lo, hi in self._slices]
+            outcomes = self._call_all(workers, "step", args)
         rewards = np.zeros(self.num_envs, dtype=np.float64)
         terminations = np.zeros(self.num_envs, dtype=np.bool_)
         truncations = np.zeros(self.num_envs, dtype=np.bool_)
@@ -253,7 +261,10 @@ class WorkerVectorEnv(VectorEnv):
             lo, hi = self._slices[w]
             if outcome.ok:
                 part, rew, term, trunc, infos, restarts = outcome.value
-                self._note_restarts(restarts)
+                if self._packed:
+                    part, rew, term, trunc = self._unpack(part, rew, term, trunc, hi - lo)
+                    infos = infos or [{}] * (hi - lo)
+                self._note_restarts(restarts or [])
             else:
                 if isinstance(outcome.value, DisabledAutoresetError):
                     raise outcome.value
@@ -268,6 +279,15 @@ class WorkerVectorEnv(VectorEnv):
             terminations,
             truncations,
             self._join_infos(infos_per_env),
+        )
+
+    def _unpack(self, obs: bytes, rew: bytes, term: bytes, trunc: bytes, count: int) -> tuple:
+        space = self.single_observation_space
+        return (
+            np.frombuffer(obs, dtype=space.dtype).reshape(count, *space.shape),
+            np.frombuffer(rew, dtype=np.float64),
+            np.frombuffer(term, dtype=np.bool_),
+            np.frombuffer(trunc, dtype=np.bool_),
         )
 
     def _restart_during_step(self, w: int, error: str) -> tuple[Any, list[dict[str, Any]]]:

@@ -181,6 +181,28 @@ class EnvGroup:
         self.autoreset = np.logical_or(terminations, truncations)
         return self._batch(self.last_obs), rewards, terminations, truncations, infos, restarts
 
+    def step_packed(self, action_bytes: bytes) -> tuple:
+        """``step`` for Box spaces with raw bytes in and out (cheaper to send than arrays).
+
+        Returns (obs, rewards, terminations, truncations) as bytes, then the
+        infos (None when all are empty) and the restarts (None when none).
+        """
+        space = self.single_action_space
+        actions = (
+            np.frombuffer(action_bytes, dtype=space.dtype)
+            .reshape(len(self.envs), *space.shape)
+            .copy()
+        )
+        obs, rewards, terminations, truncations, infos, restarts = self.step(actions)
+        return (
+            obs.tobytes(),
+            rewards.tobytes(),
+            terminations.tobytes(),
+            truncations.tobytes(),
+            infos if any(infos) else None,
+            restarts or None,
+        )
+
     def _restart_in_step(self, j: int) -> tuple[Any, dict[str, Any]]:
         final_obs = self.last_obs[j]
         seed = self._rebuild(j)

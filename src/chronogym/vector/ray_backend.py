@@ -6,6 +6,7 @@ import contextlib
 import math
 import os
 import socket
+import time
 import traceback
 from typing import Any
 
@@ -41,6 +42,8 @@ def ensure_ray(address: str | None = None) -> None:
     """
     import ray
 
+    if address:
+        _check_reachable(address)
     if ray.is_initialized():
         return
     address = address or os.environ.get("RAY_ADDRESS") or None
@@ -58,11 +61,35 @@ def cluster_cpus() -> float:
     return float(ray.cluster_resources().get("CPU", 0.0))
 
 
+def _free_cpu_share(num_workers: int, wanted: float, wait: float = 5.0) -> float:
+    """CPUs per worker the cluster can grant now: ``wanted`` if free within ``wait`` s.
+
+    Actors killed a moment ago give their CPUs back asynchronously, hence the wait.
+    """
+    import ray
+
+    deadline = time.monotonic() + wait
+    while True:
+        free = float(ray.available_resources().get("CPU", 0.0))
+        if free >= wanted * num_workers - 1e-9 or time.monotonic() > deadline:
+            return min(wanted, math.floor(free / num_workers * 100) / 100)
+        time.sleep(0.05)
+
+
 def resolve_worker_cpus(num_cpus: float | None, num_workers: int) -> float:
     """CPUs per worker: validate an explicit value, or share the cluster evenly (at most 1)."""
+    import ray
+
     total = cluster_cpus()
     if num_cpus is None:
-        return min(1.0, math.floor(total / num_workers * 100) / 100) if total else 1.0
+        share = _free_cpu_share(num_workers, min(1.0, math.floor(total / num_workers * 100) / 100))
+        if share < 0.01:
+            free = float(ray.available_resources().get("CPU", 0.0))
+            raise RuntimeError(
+                f"the Ray cluster has {free:g} free CPUs, too few for {num_workers} workers; "
+                "free some (other actors hold them) or pass num_cpus explicitly"
+            )
+        return min(1.0, share)
     if isinstance(num_cpus, bool) or not isinstance(num_cpus, (int, float)) or num_cpus < 0:
         raise ValueError(f"num_cpus={num_cpus!r}: expected a number >= 0 (fractions allowed)")
     if num_workers * num_cpus > total + 1e-9:

@@ -1,0 +1,61 @@
+"""Tasks that misbehave on purpose, for fault-handling tests (importable by Ray workers)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from chronogym.env import SimEnv
+from chronogym.tasks.cartpole import CartPoleTask
+
+
+class FailingCartPole(CartPoleTask):
+    """Raises in apply_action at step ``fail_at`` of an episode reset with seed ``fail_seed``."""
+
+    def __init__(self, fail_seed: int | None = None, fail_at: int = 5, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.fail_seed = fail_seed
+        self.fail_at = fail_at
+        self.armed = False
+        self.steps = 0
+
+    def reset(self, rng: np.random.Generator, options) -> None:
+        super().reset(rng, options)
+        self.steps = 0
+
+    def apply_action(self, action: np.ndarray) -> None:
+        self.steps += 1
+        if self.armed and self.steps == self.fail_at:
+            raise RuntimeError(f"injected failure at step {self.steps}")
+        super().apply_action(action)
+
+
+class FailingEnv(SimEnv):
+    """Arms its task's failure when reset with ``fail_seed`` (or always, with ``fail_always``)."""
+
+    def __init__(self, fail_seed: int | None, fail_always: bool = False) -> None:
+        super().__init__(FailingCartPole(fail_seed=fail_seed))
+        self.fail_always = fail_always
+
+    def reset(self, *, seed=None, options=None):
+        if seed is not None or self.fail_always:
+            self.task.armed = self.fail_always or seed == self.task.fail_seed
+        return super().reset(seed=seed, options=options)
+
+
+class ExplodingCartPole(CartPoleTask):
+    """Applies a huge force after ``explode_at`` steps so the state becomes non-finite."""
+
+    def __init__(self, explode_at: int = 3, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.explode_at = explode_at
+        self.steps = 0
+
+    def reset(self, rng, options) -> None:
+        super().reset(rng, options)
+        self.steps = 0
+
+    def apply_action(self, action: np.ndarray) -> None:
+        self.steps += 1
+        super().apply_action(action)
+        if self.steps >= self.explode_at:
+            self.data.qvel[:] = 1e300

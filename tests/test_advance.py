@@ -1,0 +1,120 @@
+"""advance_all: dispatch on each advanceable shape, in the documented order."""
+
+from __future__ import annotations
+
+import mujoco
+import pytest
+
+from chronogym import Advancer, Synced, advance_all
+from chronogym.tasks.cartpole import XML_PATH
+
+
+class System:
+    """Shaped like a Chrono ChSystem: DoStepDynamics(dt)."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def DoStepDynamics(self, dt):
+        self.log.append(("system.DoStepDynamics", dt))
+
+
+class Terrain:
+    """Shaped like a Chrono terrain or driver: Synchronize(t) + Advance(dt)."""
+
+    def __init__(self, log, name="terrain"):
+        self.log, self.name = log, name
+
+    def Synchronize(self, t):
+        self.log.append((f"{self.name}.Synchronize", t))
+
+    def Advance(self, dt):
+        self.log.append((f"{self.name}.Advance", dt))
+
+
+class Vehicle:
+    """Shaped like a Chrono vehicle: Synchronize(t, inputs, terrain) + Advance(dt)."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def Synchronize(self, t, inputs, terrain):
+        self.log.append(("vehicle.Synchronize", t, inputs, terrain))
+
+    def Advance(self, dt):
+        self.log.append(("vehicle.Advance", dt))
+
+
+class Sensors:
+    """Shaped like a Chrono sensor manager or Viper robot: Update()."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def Update(self):
+        self.log.append(("sensors.Update",))
+
+
+def test_dispatch_order_over_every_shape():
+    log: list = []
+    model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+    data = mujoco.MjData(model)
+    dt = model.opt.timestep
+    objects = [
+        Sensors(log),
+        Terrain(log, "driver"),
+        Synced(Vehicle(log), lambda t: ("throttle", "terrain")),
+        (model, data),
+        System(log),
+        lambda step: log.append(("callable", step)),
+        Terrain(log),
+    ]
+    advancer = Advancer(objects, dt)
+    advancer(1.5)
+    # Phase 1: every Synchronize in list order; phase 2: every step call in list order.
+    assert log == [
+        ("driver.Synchronize", 1.5),
+        ("vehicle.Synchronize", 1.5, "throttle", "terrain"),
+        ("terrain.Synchronize", 1.5),
+        ("sensors.Update",),
+        ("driver.Advance", dt),
+        ("vehicle.Advance", dt),
+        ("system.DoStepDynamics", dt),
+        ("callable", dt),
+        ("terrain.Advance", dt),
+    ]
+    assert data.time == pytest.approx(dt)
+    assert [line.split(": ")[1] for line in advancer.plan] == [
+        "Sensors.Update",
+        "Terrain.Synchronize(t) + Advance",
+        "Vehicle.Synchronize(t, *args) + Advance",
+        "mujoco.mj_step",
+        "System.DoStepDynamics",
+        "<lambda>(dt)",
+        "Terrain.Synchronize(t) + Advance",
+    ]
+
+
+def test_advance_all_steps_mujoco_pair():
+    model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+    data = mujoco.MjData(model)
+    for _ in range(3):
+        advance_all([(model, data)], model.opt.timestep)
+    assert data.time == pytest.approx(3 * model.opt.timestep)
+
+
+def test_mujoco_timestep_mismatch_is_rejected():
+    model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+    with pytest.raises(ValueError, match="timestep 0.002 differs from dt=0.01"):
+        Advancer([(model, mujoco.MjData(model))], 0.01)
+
+
+def test_unsteppable_object_is_rejected():
+    with pytest.raises(TypeError, match="advanceable 0 of type object has no way to be stepped"):
+        Advancer([object()], 0.01)
+
+
+@pytest.mark.parametrize("dt", [0, -1.0, float("inf")])
+def test_bad_dt_is_rejected(dt):
+    with pytest.raises(ValueError, match="dt="):
+        advance_all([], dt)

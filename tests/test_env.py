@@ -1,0 +1,131 @@
+"""SimEnv: Gymnasium conformance, time limits, divergence, action checks, rendering."""
+
+from __future__ import annotations
+
+import ctypes.util
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from faulty_tasks import ExplodingCartPole
+from gymnasium.utils.env_checker import check_env
+
+import chronogym
+from chronogym import SimEnv
+from chronogym.registration import TASKS
+from chronogym.tasks.cartpole import CartPoleTask
+
+HAS_EGL = ctypes.util.find_library("EGL") is not None
+ENV_IDS = [f"chronogym/{name}" for name in TASKS]
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_registered_env_passes_gymnasium_checker(env_id):
+    env = gym.make(env_id, render_mode="rgb_array" if HAS_EGL else None)
+    check_env(env.unwrapped, skip_render_check=not HAS_EGL)
+    env.close()
+
+
+def test_make_forwards_task_kwargs():
+    env = gym.make("chronogym/CartPole-v0", k=4, dt=0.001)
+    assert env.unwrapped.k == 4
+    assert env.unwrapped.task.model.opt.timestep == 0.001
+    assert env.unwrapped.control_dt == pytest.approx(0.004)
+
+
+def test_step_advances_k_ticks():
+    env = SimEnv(CartPoleTask(k=7))
+    env.reset(seed=0)
+    env.step(np.zeros(1, dtype=np.float32))
+    assert env.task.data.time == pytest.approx(7 * 0.002)
+    assert env.sim_time == pytest.approx(7 * 0.002)
+
+
+def test_time_limit_truncates():
+    env = SimEnv(CartPoleTask(max_episode_steps=3, reset_noise=0.0))
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(1, dtype=np.float32))[3] for _ in range(3)]
+    assert flags == [False, False, True]
+
+
+def test_max_episode_steps_argument_overrides_task():
+    env = SimEnv(CartPoleTask(reset_noise=0.0), max_episode_steps=2)
+    env.reset(seed=0)
+    env.step(np.zeros(1, dtype=np.float32))
+    assert env.step(np.zeros(1, dtype=np.float32))[3] is True
+
+
+def test_divergence_terminates_with_flag():
+    env = SimEnv(ExplodingCartPole(explode_at=2))
+    env.reset(seed=0)
+    obs, reward, terminated, _, info = env.step(np.zeros(1, dtype=np.float32))
+    assert not terminated and "diverged" not in info
+    obs, reward, terminated, _, info = env.step(np.zeros(1, dtype=np.float32))
+    assert terminated is True and info["diverged"] is True
+    assert np.isfinite(obs).all() and np.isfinite(reward)
+
+
+def test_seeded_reset_is_reproducible_and_later_resets_continue_the_stream():
+    env = SimEnv(CartPoleTask())
+    first, _ = env.reset(seed=42)
+    second, _ = env.reset()
+    again, _ = env.reset(seed=42)
+    np.testing.assert_array_equal(first, again)
+    assert not np.array_equal(first, second)
+
+
+@pytest.mark.parametrize(
+    ("action", "error", "match"),
+    [
+        (
+            np.zeros(2, dtype=np.float32),
+            ValueError,
+            r"action shape \(2,\) is wrong; expected \(1,\)",
+        ),
+        (np.array(["a"]), TypeError, "action dtype <U1 is not numeric"),
+        (np.array([np.nan], dtype=np.float32), ValueError, "NaN/Inf"),
+        (np.array([np.inf]), ValueError, "NaN/Inf"),
+    ],
+)
+def test_bad_action_is_rejected(action, error, match):
+    env = SimEnv(CartPoleTask())
+    env.reset(seed=0)
+    with pytest.raises(error, match=match):
+        env.step(action)
+
+
+def test_clip_mode_replaces_non_finite_actions():
+    env = SimEnv(CartPoleTask(), invalid_action="clip")
+    env.reset(seed=0)
+    env.step(np.array([np.inf], dtype=np.float32))
+    assert env.task.data.ctrl[0] == 1.0
+    env.step(np.array([np.nan], dtype=np.float32))
+    assert env.task.data.ctrl[0] == 0.0
+
+
+def test_unknown_invalid_action_mode_is_rejected():
+    with pytest.raises(ValueError, match="invalid_action='ignore'"):
+        SimEnv(CartPoleTask(), invalid_action="ignore")
+
+
+@pytest.mark.skipif(not HAS_EGL, reason="no EGL library: install libegl1 + libgl1-mesa-dri")
+def test_render_rgb_array():
+    env = gym.make("chronogym/CartPole-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (360, 480, 3) and frame.dtype == np.uint8
+    assert frame.std() > 5  # a real picture, not a blank buffer
+    env.close()
+
+
+def test_package_import_is_light():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, chronogym; "
+        "print(sorted(m for m in ('ray', 'mujoco', 'torch', 'pychrono') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+    assert {"SimEnv", "RayVectorEnv", "Task", "advance_all"} <= set(chronogym.__all__)
