@@ -78,3 +78,11 @@ def test_bad_options():
 def test_step_before_reset():
     with pytest.raises(RuntimeError, match=r"step\(\) called before reset\(\)"):
         SerialVectorEnv(ENV_ID, 2).step(np.zeros((2, 1), np.float32))
+
+
+def test_envs_with_different_spaces_are_rejected():
+    import gymnasium as gym
+
+    fns = [lambda: gym.make(ENV_ID), lambda: gym.make("Pendulum-v1")]
+    with pytest.raises(RuntimeError, match="env 1 has spaces"):
+        SerialVectorEnv(fns)

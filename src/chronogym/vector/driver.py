@@ -11,6 +11,7 @@ reported as truncated with ``info["worker_restarted"] = True``.
 from __future__ import annotations
 
 import logging
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -127,11 +128,11 @@ class WorkerVectorEnv(VectorEnv):
         self._env_kwargs = env_kwargs
         self._seed_roots = [int(np.random.SeedSequence().generate_state(1)[0])] * self.num_envs
         self._restart_counts = [0] * self.num_envs
-        self.restarts: list[tuple[int, str]] = []
+        self.restarts: deque[tuple[int, str]] = deque(maxlen=1000)  # (env index, error)
         self._started = False
         backend.start([self._group_kwargs(w) for w in range(self.num_workers)])
         self._started = True
-        obs_space, act_space, metadata, render_mode = self._call_one(0, "spaces")
+        obs_space, act_space, metadata, render_mode = self._check_spaces()
         self.single_observation_space = obs_space
         self.single_action_space = act_space
         self.observation_space = batch_space(obs_space, self.num_envs)
@@ -152,6 +153,22 @@ class WorkerVectorEnv(VectorEnv):
             "restart_counts": self._restart_counts[lo:hi],
             "env_kwargs": self._env_kwargs,
         }
+
+    def _check_spaces(self) -> tuple[Any, Any, dict[str, Any], str | None]:
+        """Spaces of worker 0, after checking that every worker reports the same."""
+        workers = list(range(self.num_workers))
+        outcomes = self._call_all(workers, "spaces", [()] * self.num_workers)
+        for w, outcome in enumerate(outcomes):
+            if not outcome.ok:
+                raise WorkerCallError(f"worker {w} failed to report its spaces:\n{outcome.error}")
+        first = outcomes[0].value
+        for w, outcome in enumerate(outcomes[1:], start=1):
+            if outcome.value[:2] != first[:2]:
+                raise RuntimeError(
+                    f"envs of worker {w} have spaces {outcome.value[:2]}; expected the same "
+                    f"spaces as env 0: {first[:2]}"
+                )
+        return first
 
     def _call_one(self, w: int, method: str, *args: Any) -> Any:
         (outcome,) = self._backend.gather([w], [self._backend.submit(w, method, *args)])

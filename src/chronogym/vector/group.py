@@ -74,7 +74,18 @@ class EnvGroup:
 
     # -- introspection -----------------------------------------------------------------
     def spaces(self) -> tuple[gym.Space, gym.Space, dict[str, Any], str | None]:
+        """Spaces, metadata and render mode, checked to be the same for every env here."""
         env = self.envs[0]
+        for index, other in zip(self.indices, self.envs, strict=True):
+            if (other.observation_space, other.action_space) != (
+                env.observation_space,
+                env.action_space,
+            ):
+                raise RuntimeError(
+                    f"env {index} has spaces ({other.observation_space}, {other.action_space}); "
+                    f"expected those of env {self.indices[0]}: "
+                    f"({env.observation_space}, {env.action_space})"
+                )
         return env.observation_space, env.action_space, dict(env.metadata), env.render_mode
 
     def pid(self) -> int:
