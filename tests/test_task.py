@@ -29,9 +29,11 @@ def cartpole_function_task() -> FunctionTask:
         res["data"].ctrl[0] = action[0]
 
     def observe(res):
-        return np.concatenate([res["data"].qpos, res["data"].qvel])
+        obs = np.concatenate([res["data"].qpos, res["data"].qvel])
+        obs[1] = (obs[1] + np.pi) % (2 * np.pi) - np.pi
+        return obs
 
-    high = np.array([1.0, np.pi, np.inf, np.inf])
+    high = np.array([np.inf, np.pi, np.inf, np.inf])
     return FunctionTask(
         init=init,
         reset=reset,

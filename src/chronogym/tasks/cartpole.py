@@ -1,6 +1,7 @@
 """Cart-pole balancing on MuJoCo: the small task behind the demo, tests and benchmarks.
 
-Observation (float64, 4): cart position, pole angle, cart velocity, pole angular velocity.
+Observation (float64, 4): cart position, pole angle (wrapped to [-pi, pi]), cart velocity,
+pole angular velocity.
 Action (float32, 1): normalized force on the cart in [-1, 1] (10 N at 1).
 Reward: 1 per step while the pole is up. Terminated when |angle| > 0.2 rad or the
 cart leaves [-0.9, 0.9] m. Physics: ``dt`` = 2 ms, ``k`` = 10 ticks per step (50 Hz control).
@@ -46,7 +47,7 @@ class CartPoleTask(MujocoTask):
         return mujoco.MjModel.from_xml_path(str(XML_PATH))
 
     def setup(self) -> None:
-        high = np.array([1.0, np.pi, np.inf, np.inf])
+        high = np.array([np.inf, np.pi, np.inf, np.inf])  # the rail's end stop is soft
         self.observation_space = spaces.Box(-high, high, dtype=np.float64)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 
@@ -61,7 +62,9 @@ class CartPoleTask(MujocoTask):
         self.data.ctrl[0] = action[0]
 
     def observe(self) -> np.ndarray:
-        return np.concatenate([self.data.qpos, self.data.qvel])
+        obs = np.concatenate([self.data.qpos, self.data.qvel])
+        obs[1] = (obs[1] + np.pi) % (2 * np.pi) - np.pi
+        return obs
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:
         return 1.0

@@ -8,6 +8,7 @@ import os
 import socket
 import time
 import traceback
+import warnings
 from typing import Any
 
 from chronogym.vector.driver import Outcome
@@ -85,10 +86,13 @@ def resolve_worker_cpus(num_cpus: float | None, num_workers: int) -> float:
         share = _free_cpu_share(num_workers, min(1.0, math.floor(total / num_workers * 100) / 100))
         if share < 0.01:
             free = float(ray.available_resources().get("CPU", 0.0))
-            raise RuntimeError(
-                f"the Ray cluster has {free:g} free CPUs, too few for {num_workers} workers; "
-                "free some (other actors hold them) or pass num_cpus explicitly"
+            warnings.warn(
+                f"the Ray cluster has {free:g} free CPUs for {num_workers} workers (other "
+                "actors hold the rest); starting them with num_cpus=0, which oversubscribes. "
+                "Pass num_cpus explicitly to reserve CPUs.",
+                stacklevel=3,
             )
+            return 0.0
         return min(1.0, share)
     if isinstance(num_cpus, bool) or not isinstance(num_cpus, (int, float)) or num_cpus < 0:
         raise ValueError(f"num_cpus={num_cpus!r}: expected a number >= 0 (fractions allowed)")

@@ -1,0 +1,537 @@
+"""Throughput of chronogym's vector envs on the cart-pole task, against Gymnasium's AsyncVectorEnv.
+
+Measures env-steps/s of ``chronogym/CartPole-v0`` for a raw MuJoCo loop, one SimEnv,
+SerialVectorEnv, gymnasium's AsyncVectorEnv and RayVectorEnv (workers x envs per
+worker), each at several physics costs per env step (``k`` ticks of ``dt`` = 2 ms).
+Prints an aligned table and writes JSON (default ``benchmarks/results/throughput.json``).
+
+    python benchmarks/throughput.py            # default sweep, < 4 min on 2 cores
+    python benchmarks/throughput.py --quick    # smoke run, < 1 min
+
+Counting: ``steps/s`` counts env steps as Gymnasium does, including the autoreset
+steps of NEXT_STEP mode, which run no physics. With random actions the pole falls
+within a step or two once ``k`` is large, so up to half of all steps are such resets.
+``sim-steps/s`` counts only the env steps that ran physics; the AsyncVectorEnv ratio
+and the parallel efficiency use it, so they compare like with like and against the
+raw single-env rate (``k`` ticks + observe per step).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+import chronogym
+from chronogym.tasks.cartpole import CartPoleTask
+
+ENV_ID = "chronogym/CartPole-v0"
+DT = 0.002
+DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "throughput.json"
+VECTOR_BACKENDS = ("serial", "async", "ray")
+RAW_MIN_SECONDS = 0.5  # shortest timing of the raw loop
+RAY_SETTLE_S = 2.0  # let a fresh Ray cluster's processes finish starting before timing
+
+
+@dataclass(frozen=True)
+class CostLevel:
+    """One physics cost per env step: the target and the ``k`` chosen for it.
+
+    What a step really costs is measured by the level's raw-loop config.
+    """
+
+    target_us: float
+    k: int
+
+
+@dataclass(frozen=True)
+class Config:
+    """One measured configuration."""
+
+    backend: str  # raw | simenv | serial | async | ray
+    num_envs: int
+    workers: int  # processes stepping envs (1 for raw, simenv, serial)
+    envs_per_worker: int
+    level: CostLevel
+
+
+@dataclass
+class Result:
+    """What one configuration measured."""
+
+    config: Config
+    env_steps: int  # as Gymnasium counts them (autoreset steps included)
+    sim_steps: int  # env steps that ran physics
+    calls: int  # vector steps (or single-env steps)
+    seconds: float
+    setup_s: float
+    derived: dict[str, float | None] = field(default_factory=dict)
+
+    @property
+    def steps_per_s(self) -> float:
+        """Env steps per second, Gymnasium's count."""
+        return self.env_steps / self.seconds
+
+    @property
+    def sim_steps_per_s(self) -> float:
+        """Env steps that ran physics, per second."""
+        return self.sim_steps / self.seconds
+
+    @property
+    def us_per_call(self) -> float:
+        """Wall time of one vector step (one env step for raw and simenv), in µs."""
+        return self.seconds / self.calls * 1e6
+
+
+# -- command line ---------------------------------------------------------------------------
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """Command-line options; ``--quick`` shrinks the sweep to a smoke run."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=2.0, help="timed wall time per config")
+    parser.add_argument("--quick", action="store_true", help="smoke run (< 60 s)")
+    parser.add_argument(
+        "--num-envs", type=int, nargs="+", default=[2, 8, 16], help="num_envs values"
+    )
+    parser.add_argument(
+        "--targets-us",
+        type=float,
+        nargs="+",
+        default=[50.0, 500.0, 5000.0],
+        help="physics cost per env step to aim for, in µs (k is chosen per target)",
+    )
+    parser.add_argument(
+        "--one-per-worker",
+        type=int,
+        default=8,
+        help="num_envs of the extra RayVectorEnv point with one env per worker (0: none)",
+    )
+    parser.add_argument("--warmup", type=int, default=5, help="untimed vector steps per config")
+    parser.add_argument("--seed", type=int, default=0, help="seed of envs and random actions")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON output path")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.seconds = min(args.seconds, 0.3)
+        args.num_envs = [2, 8]
+        args.targets_us = [50.0, 5000.0]
+        args.warmup = 2
+    return args
+
+
+# -- machine --------------------------------------------------------------------------------
+
+
+def cpu_count() -> int:
+    """CPUs this process may use (the affinity mask where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def machine_info() -> dict[str, Any]:
+    """CPU count, platform and library versions, for the JSON report."""
+    import mujoco
+    import ray
+
+    return {
+        "cpu_count": os.cpu_count(),
+        "usable_cpus": cpu_count(),
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "python": platform.python_version(),
+        "chronogym": chronogym.__version__,
+        "ray": ray.__version__,
+        "mujoco": mujoco.__version__,
+        "gymnasium": gym.__version__,
+        "numpy": np.__version__,
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+# -- single env: raw MuJoCo loop and SimEnv ---------------------------------------------------
+
+
+def raw_task(k: int) -> CartPoleTask:
+    """The cart-pole task with its model and data built, outside any Gymnasium env."""
+    task = CartPoleTask(dt=DT, k=k)
+    task.init()
+    return task
+
+
+def run_raw(k: int, seconds: float, seed: int) -> tuple[int, float]:
+    """Tight loop: set the control, ``k`` x ``mj_step``, observe; reset when the pole falls.
+
+    Returns (env steps, seconds). Resets are timed but not counted as steps.
+    """
+    import mujoco
+
+    task = raw_task(k)
+    model, data, step = task.model, task.data, mujoco.mj_step
+    rng = np.random.default_rng(seed)
+    task.reset(rng, None)
+    steps, start = 0, time.perf_counter()
+    while True:
+        data.ctrl[0] = rng.uniform(-1.0, 1.0)
+        for _ in range(k):
+            step(model, data)
+        obs = np.concatenate([data.qpos, data.qvel])  # CartPoleTask.observe
+        steps += 1
+        if task.terminated(obs):
+            task.reset(rng, None)
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds and steps >= 3:
+            return steps, elapsed
+
+
+def measure_tick_us(seconds: float, seed: int) -> float:
+    """Cost of one physics tick (``mj_step``) in the raw loop, in µs."""
+    k = 100
+    steps, elapsed = run_raw(k, seconds, seed)
+    return elapsed / (steps * k) * 1e6
+
+
+def choose_levels(targets_us: list[float], tick_us: float) -> list[CostLevel]:
+    """A ``k`` per target physics cost per env step (at least 1 tick)."""
+    return [CostLevel(target, max(1, round(target / tick_us))) for target in targets_us]
+
+
+def run_simenv(k: int, seconds: float, seed: int) -> tuple[int, float]:
+    """``gymnasium.make(...).unwrapped`` stepped with random actions, reset on done."""
+    env = gym.make(ENV_ID, k=k, dt=DT).unwrapped
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    steps, start = 0, time.perf_counter()
+    try:
+        while True:
+            action = rng.uniform(-1.0, 1.0, size=(1,)).astype(np.float32)
+            _, _, terminated, truncated, _ = env.step(action)
+            steps += 1
+            if terminated or truncated:
+                env.reset()
+            elapsed = time.perf_counter() - start
+            if elapsed >= seconds and steps >= 3:
+                return steps, elapsed
+    finally:
+        env.close()
+
+
+# -- vector envs ----------------------------------------------------------------------------
+
+
+def make_vector_env(config: Config) -> gym.vector.VectorEnv:
+    """Build the vector env a config names."""
+    env_kwargs = {"k": config.level.k, "dt": DT}
+    if config.backend == "serial":
+        return chronogym.SerialVectorEnv(ENV_ID, config.num_envs, env_kwargs=env_kwargs)
+    if config.backend == "async":
+        return gym.make_vec(ENV_ID, config.num_envs, vectorization_mode="async", **env_kwargs)
+    if config.backend == "ray":
+        return chronogym.RayVectorEnv(
+            ENV_ID,
+            config.num_envs,
+            envs_per_worker=config.envs_per_worker,
+            env_kwargs=env_kwargs,
+        )
+    raise ValueError(f"backend={config.backend!r}: expected one of {VECTOR_BACKENDS}")
+
+
+def step_vector(
+    env: gym.vector.VectorEnv, rng: np.random.Generator, done: np.ndarray
+) -> tuple[int, np.ndarray]:
+    """One vector step with random actions; returns (envs that ran physics, new done mask)."""
+    actions = rng.uniform(-1.0, 1.0, size=(env.num_envs, 1)).astype(np.float32)
+    _, _, terminated, truncated, _ = env.step(actions)
+    return int(env.num_envs - done.sum()), np.logical_or(terminated, truncated)
+
+
+def time_vector_env(
+    env: gym.vector.VectorEnv, seconds: float, warmup: int, seed: int
+) -> tuple[int, int, float]:
+    """Reset, warm up, then step for ``seconds``; returns (vector steps, sim steps, seconds)."""
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    done = np.zeros(env.num_envs, dtype=np.bool_)
+    for _ in range(warmup):
+        _, done = step_vector(env, rng, done)
+    calls, sim_steps, start = 0, 0, time.perf_counter()
+    while True:
+        ran, done = step_vector(env, rng, done)
+        calls, sim_steps = calls + 1, sim_steps + ran
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds and calls >= 3:
+            return calls, sim_steps, elapsed
+
+
+def run_vector(config: Config, seconds: float, warmup: int, seed: int) -> Result:
+    """Build, warm up, time and close one vector env."""
+    start = time.perf_counter()
+    env = make_vector_env(config)
+    setup_s = time.perf_counter() - start
+    try:
+        calls, sim_steps, elapsed = time_vector_env(env, seconds, warmup, seed)
+    finally:
+        env.close()
+    return Result(config, calls * config.num_envs, sim_steps, calls, elapsed, setup_s)
+
+
+def run_single(config: Config, seconds: float, seed: int) -> Result:
+    """Time the raw loop or one SimEnv."""
+    if config.backend == "raw":  # the normaliser of every efficiency: time it a bit longer
+        steps, elapsed = run_raw(config.level.k, max(seconds, RAW_MIN_SECONDS), seed)
+    else:
+        steps, elapsed = run_simenv(config.level.k, seconds, seed)
+    return Result(config, steps, steps, steps, elapsed, 0.0)
+
+
+def run_config(config: Config, args: argparse.Namespace) -> Result:
+    """Measure one configuration."""
+    if config.backend in ("raw", "simenv"):
+        return run_single(config, args.seconds, args.seed)
+    return run_vector(config, args.seconds, args.warmup, args.seed)
+
+
+# -- the plan -------------------------------------------------------------------------------
+
+
+def ray_shapes(num_envs: int, one_per_worker: int) -> list[tuple[int, int]]:
+    """(workers, envs_per_worker) points for RayVectorEnv: 1 and 2 workers, maybe 1 env each."""
+    shapes = []
+    for workers in (1, 2):
+        if workers <= num_envs:
+            per = math.ceil(num_envs / workers)
+            shapes.append((math.ceil(num_envs / per), per))
+    if num_envs == one_per_worker:
+        shapes.append((num_envs, 1))
+    return list(dict.fromkeys(shapes))
+
+
+def vector_configs(level: CostLevel, num_envs: int, one_per_worker: int) -> list[Config]:
+    """Serial, Async and the Ray sweep at one cost level and one num_envs."""
+    configs = [
+        Config("serial", num_envs, 1, num_envs, level),
+        Config("async", num_envs, num_envs, 1, level),
+    ]
+    for workers, per in ray_shapes(num_envs, one_per_worker):
+        configs.append(Config("ray", num_envs, workers, per, level))
+    return configs
+
+
+def build_plan(levels: list[CostLevel], args: argparse.Namespace) -> list[Config]:
+    """Every configuration, grouped by cost level so each group is measured side by side."""
+    plan = []
+    for level in levels:
+        plan += [Config("raw", 1, 1, 1, level), Config("simenv", 1, 1, 1, level)]
+        for num_envs in args.num_envs:
+            plan += vector_configs(level, num_envs, args.one_per_worker)
+    return plan
+
+
+# -- derived numbers and output -------------------------------------------------------------
+
+
+def derive(results: list[Result], cpus: int) -> None:
+    """Fill each result's ratio to AsyncVectorEnv, efficiency and physics per remote call."""
+    raw = {r.config.level.k: r.sim_steps_per_s for r in results if r.config.backend == "raw"}
+    asyncs = {
+        (r.config.level.k, r.config.num_envs): r.sim_steps_per_s
+        for r in results
+        if r.config.backend == "async"
+    }
+    for r in results:
+        c = r.config
+        base = raw[c.level.k]
+        physics_us = 1e6 / base
+        ref = asyncs.get((c.level.k, c.num_envs)) if c.backend in VECTOR_BACKENDS else None
+        r.derived = {
+            "physics_us_per_step": physics_us,
+            "physics_us_per_call": c.envs_per_worker * physics_us,
+            "vs_async": r.sim_steps_per_s / ref if ref else None,
+            "efficiency": r.sim_steps_per_s / (c.workers * base),
+            "efficiency_per_cpu": r.sim_steps_per_s / (min(c.workers, cpus) * base),
+        }
+
+
+COLUMNS = (  # header, width, format
+    ("phys/step", 10, "{:.0f}µs"),
+    ("backend", 7, "{}"),
+    ("N", 3, "{}"),
+    ("wrk", 3, "{}"),
+    ("e/w", 3, "{}"),
+    ("phys/call", 9, "{:.2f}ms"),
+    ("steps/s", 9, "{:.0f}"),
+    ("sim-st/s", 9, "{:.0f}"),
+    ("µs/vstep", 9, "{:.0f}"),
+    ("x_async", 6, "{:.2f}"),
+    ("eff", 5, "{:.2f}"),
+    ("eff/cpu", 7, "{:.2f}"),
+)
+
+
+def row_values(r: Result) -> list[Any]:
+    """The table cells of one result, in COLUMNS order."""
+    c, d = r.config, r.derived
+    return [
+        d["physics_us_per_step"],
+        c.backend,
+        c.num_envs,
+        c.workers,
+        c.envs_per_worker,
+        d["physics_us_per_call"] / 1000,  # type: ignore[operator]
+        r.steps_per_s,
+        r.sim_steps_per_s,
+        r.us_per_call,
+        d["vs_async"],
+        d["efficiency"],
+        d["efficiency_per_cpu"],
+    ]
+
+
+def format_table(results: list[Result]) -> str:
+    """Aligned text table; a blank line between cost levels."""
+    header = "  ".join(name.rjust(width) for name, width, _ in COLUMNS)
+    lines, last_k = [header, "-" * len(header)], None
+    for r in results:
+        if last_k is not None and r.config.level.k != last_k:
+            lines.append("")
+        last_k = r.config.level.k
+        cells = [
+            ("-" if value is None else fmt.format(value)).rjust(width)
+            for (_, width, fmt), value in zip(COLUMNS, row_values(r), strict=True)
+        ]
+        lines.append("  ".join(cells))
+    return "\n".join(lines)
+
+
+def notes(cpus: int, tick_us: float, results: list[Result]) -> str:
+    """The explanations printed under the table."""
+    ks = ", ".join(
+        f"k={r.config.level.k} -> {r.derived['physics_us_per_step']:.0f} µs"
+        for r in results
+        if r.config.backend == "raw"
+    )
+    return "\n".join(
+        [
+            f"physics tick (mj_step) = {tick_us:.2f} µs; per env step (raw loop): {ks}",
+            "steps/s counts autoreset steps (no physics); sim-st/s counts steps that ran "
+            "physics, and x_async / eff use it.",
+            "eff = sim-steps/s / (workers x raw single-env rate); eff/cpu uses min(workers, "
+            "CPUs) instead; wrk = Ray workers, Async processes, 1 for serial.",
+            "phys/call = envs per worker x physics per env step (what one remote call carries).",
+            f"NOTE: this machine has {cpus} CPU(s). More than {cpus} busy processes (Async with "
+            f"N > {cpus}, Ray with more than {cpus} workers, plus the driver) oversubscribe the "
+            "cores: their eff is bounded by CPUs / workers, and all numbers are noisy when the "
+            "machine is shared.",
+        ]
+    )
+
+
+def write_json(
+    path: Path,
+    info: dict[str, Any],
+    args: argparse.Namespace,
+    tick_us: float,
+    results: list[Result],
+) -> None:
+    """Write machine info, settings, cost levels and every result as JSON."""
+    levels = [
+        {**asdict(r.config.level), "physics_us_per_step": r.derived["physics_us_per_step"]}
+        for r in results
+        if r.config.backend == "raw"
+    ]
+    payload = {
+        "benchmark": "chronogym throughput (cart-pole)",
+        "env_id": ENV_ID,
+        "dt": DT,
+        "machine": info,
+        "settings": {
+            key: (str(value) if isinstance(value, Path) else value)
+            for key, value in vars(args).items()
+        },
+        "tick_us": tick_us,
+        "cost_levels": levels,
+        "results": [result_record(r) for r in results],
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+def result_record(r: Result) -> dict[str, Any]:
+    """One result as a flat JSON record."""
+    c = r.config
+    return {
+        "backend": c.backend,
+        "num_envs": c.num_envs,
+        "workers": c.workers,
+        "envs_per_worker": c.envs_per_worker,
+        "k": c.level.k,
+        "target_us": c.level.target_us,
+        "env_steps": r.env_steps,
+        "sim_steps": r.sim_steps,
+        "calls": r.calls,
+        "seconds": r.seconds,
+        "setup_s": r.setup_s,
+        "steps_per_s": r.steps_per_s,
+        "sim_steps_per_s": r.sim_steps_per_s,
+        "us_per_call": r.us_per_call,
+        **r.derived,
+    }
+
+
+# -- main -----------------------------------------------------------------------------------
+
+
+def start_ray() -> None:
+    """One local Ray cluster for the whole run (RayVectorEnv then reuses it)."""
+    import ray
+
+    ray.init(
+        address="local",
+        num_cpus=os.cpu_count(),
+        include_dashboard=False,
+        log_to_driver=False,
+        logging_level="ERROR",
+    )
+    time.sleep(RAY_SETTLE_S)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the sweep, print the table, write the JSON."""
+    args = parse_args(argv)
+    wall = time.perf_counter()
+    cpus = cpu_count()
+    tick_us = measure_tick_us(max(args.seconds, 0.3), args.seed)
+    levels = choose_levels(args.targets_us, tick_us)
+    plan = build_plan(levels, args)
+    import ray
+
+    start_ray()
+    results: list[Result] = []
+    try:
+        for config in tqdm(plan, desc="configs", unit="cfg", file=sys.stderr):
+            results.append(run_config(config, args))
+    finally:
+        ray.shutdown()
+    derive(results, cpus)
+    print(format_table(results))
+    print()
+    print(notes(cpus, tick_us, results))
+    write_json(args.out, machine_info(), args, tick_us, results)
+    print(f"\nwrote {args.out} ({time.perf_counter() - wall:.0f} s in all)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
