@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -11,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 DEMO_ENV = "chronogym/CartPole-v0"
+DEFAULT_STORAGE = "sqlite:///chronogym-optuna.db"
 BALANCE_GAINS = np.array([0.5, 10.0, 1.0, 1.5])  # on (x, angle, x velocity, angular velocity)
 
 
@@ -86,6 +88,76 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0 if identical else 1
 
 
+def cmd_optimize(args: argparse.Namespace) -> int:
+    """Optimize the lander's absorbers with Optuna TPE, trials on parallel Ray workers."""
+    import optuna
+
+    from chronogym.optim import open_storage, run_parallel_study
+    from chronogym.optim.lander import LanderObjective, describe_design, suggest_lander_design
+
+    for name in ("workers", "trials"):
+        if getattr(args, name) < 1:
+            raise SystemExit(f"--{name}={getattr(args, name)}: expected an integer >= 1")
+    objective = LanderObjective(terrain=args.terrain, seed=args.seed)
+    study_name = args.study or f"lander-{args.terrain}"
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    sampler = optuna.samplers.TPESampler(
+        seed=args.seed,
+        multivariate=True,
+        constant_liar=not args.no_constant_liar,
+        n_startup_trials=args.startup_trials,
+    )
+    study = optuna.create_study(
+        storage=open_storage(args.storage),
+        study_name=study_name,
+        direction="minimize",
+        sampler=sampler,
+        load_if_exists=True,
+    )
+    study.set_user_attr("terrain", args.terrain)
+    print(
+        f"chronogym optimize lander: study {study_name!r} in {args.storage} "
+        f"({args.terrain} terrain, {args.workers} parallel workers, {args.trials} trials)"
+    )
+    if args.workers > (os.cpu_count() or 1):
+        print(f"  note: {args.workers} workers on {os.cpu_count()} CPUs oversubscribe the machine")
+    report = run_parallel_study(
+        study,
+        suggest_lander_design,
+        objective,
+        args.trials,
+        workers=args.workers,
+        backend=args.backend,
+        address=args.address,
+    )
+    print(
+        f"  this run: {report.completed} completed, {report.failed} failed, "
+        f"{report.retried} retried, {report.recovered} recovered from a stopped run "
+        f"in {report.elapsed:.1f} s"
+    )
+    if report.best_value is None:
+        print("  no completed trial yet")
+        return 1
+    complete = [t for t in study.trials if t.state.name == "COMPLETE"]
+    prior = [t.value for t in complete[: args.startup_trials]]
+    print(f"  best trial #{report.best_number}: J = {report.best_value:.4f}")
+    print(f"    design  : {describe_design(report.best_params)}")
+    attrs = report.best_attrs
+    print(
+        f"    metrics : a_max = {attrs.get('a_max', float('nan')):.2f} m/s^2, "
+        f"E_abs/E_init = {attrs.get('E_abs', 0) / max(attrs.get('E_init', 1), 1e-9):.3f}, "
+        f"max stroke = {attrs.get('max_stroke', float('nan')):.3f} m, "
+        f"bottomed out = {attrs.get('bottomed_out')}, tipped over = {attrs.get('tipped_over')}"
+    )
+    if prior:
+        print(
+            f"  median J of the {len(prior)} prior (random start-up) trials: "
+            f"{float(np.median(prior)):.4f}"
+        )
+    print(f"  inspect the study: optuna-dashboard {args.storage}")
+    return 0
+
+
 def cmd_envs(args: argparse.Namespace) -> int:
     """List the registered chronogym environment ids."""
     import gymnasium as gym
@@ -111,6 +183,19 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--noise", type=float, default=1.5, help="policy noise std")
     demo.add_argument("--address", default=None, help="Ray cluster address (default: local)")
     demo.set_defaults(func=cmd_demo)
+    opt = sub.add_parser("optimize", help="parallel Bayesian optimization of a design")
+    opt.add_argument("problem", choices=["lander"])
+    opt.add_argument("--workers", type=int, default=2, help="trials evaluated in parallel")
+    opt.add_argument("--trials", type=int, default=40, help="finished trials wanted in the study")
+    opt.add_argument("--terrain", default="rigid", choices=["rigid", "rough"])
+    opt.add_argument("--storage", default=DEFAULT_STORAGE, help="Optuna storage URL")
+    opt.add_argument("--study", default=None, help="study name (default lander-TERRAIN)")
+    opt.add_argument("--seed", type=int, default=0)
+    opt.add_argument("--startup-trials", type=int, default=10, help="random trials before TPE")
+    opt.add_argument("--no-constant-liar", action="store_true")
+    opt.add_argument("--backend", default="ray", choices=["ray", "serial"])
+    opt.add_argument("--address", default=None, help="Ray cluster address (default: local)")
+    opt.set_defaults(func=cmd_optimize)
     envs = sub.add_parser("envs", help="list registered environment ids")
     envs.set_defaults(func=cmd_envs)
     return parser

@@ -1,0 +1,109 @@
+"""The lander design study: search space, terrains and the per-worker evaluator."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+LANDER_METRICS = (
+    "a_max",
+    "a_ref",
+    "E_abs",
+    "E_init",
+    "max_stroke",
+    "bottomed_out",
+    "tipped_over",
+    "settled",
+    "max_tilt",
+    "t_end",
+)
+
+
+def make_terrain(name: str) -> Any:
+    """Terrain preset by name: ``rigid`` (flat) or ``rough`` (8 deg slope, 12 rocks)."""
+    from chronogym.tasks.lander import Terrain
+
+    presets = {
+        "rigid": lambda: Terrain(),
+        "rough": lambda: Terrain(slope=math.radians(8.0), n_rocks=12),
+    }
+    if name not in presets:
+        raise ValueError(f"terrain={name!r}: expected one of {sorted(presets)}")
+    return presets[name]()
+
+
+TERRAINS = ("rigid", "rough")
+
+
+def suggest_lander_design(trial: Any) -> dict[str, float]:
+    """The paper's priors: f_y log-uniform; beta and alpha2 uniform on DESIGN_BOUNDS."""
+    from chronogym.tasks.lander import DESIGN_BOUNDS
+
+    return {
+        "f_y": trial.suggest_float("f_y", *DESIGN_BOUNDS["f_y"], log=True),
+        "beta": trial.suggest_float("beta", *DESIGN_BOUNDS["beta"]),
+        "alpha2": trial.suggest_float("alpha2", *DESIGN_BOUNDS["alpha2"]),
+    }
+
+
+class LanderEvaluator:
+    """Evaluates designs in one worker, keeping its simulation between trials.
+
+    A new ``f_y`` reuses the compiled model; a new geometry rebuilds it
+    (``LanderSim.reset``). A diverged simulation is a :class:`TrialFailure`.
+    """
+
+    def __init__(self, terrain: str, seed: int) -> None:
+        self.terrain = make_terrain(terrain)
+        self.seed = seed
+        self.sim: Any = None
+
+    def __call__(self, params: dict[str, Any]) -> tuple[float, dict[str, Any]]:
+        from chronogym.engines.mujoco import mujoco_diverged
+        from chronogym.optim.parallel import TrialFailure
+        from chronogym.tasks.lander import LanderDesign, LanderSim
+
+        design = LanderDesign(**params)
+        if self.sim is None:
+            self.sim = LanderSim(design, terrain=self.terrain, seed=self.seed)
+        else:
+            self.sim.reset(design)
+        metrics = self.sim.run()
+        if mujoco_diverged(self.sim.data) or not math.isfinite(metrics["J"]):
+            raise TrialFailure(f"the simulation diverged (J={metrics['J']!r})")
+        attrs = {key: _plain(metrics[key]) for key in LANDER_METRICS if key in metrics}
+        return float(metrics["J"]), attrs
+
+
+@dataclass(frozen=True)
+class LanderObjective:
+    """Picklable factory of :class:`LanderEvaluator`, sent to each worker."""
+
+    terrain: str = "rigid"
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.terrain not in TERRAINS:
+            raise ValueError(f"terrain={self.terrain!r}: expected one of {list(TERRAINS)}")
+
+    def __call__(self) -> LanderEvaluator:
+        return LanderEvaluator(self.terrain, self.seed)
+
+
+def describe_design(params: dict[str, float]) -> str:
+    """``f_y = 3.52 kN, beta = 61.0 deg, alpha2 = 21.4 deg``."""
+    return (
+        f"f_y = {params['f_y'] / 1000:.3g} kN, beta = {math.degrees(params['beta']):.1f} deg, "
+        f"alpha2 = {math.degrees(params['alpha2']):.1f} deg"
+    )
+
+
+def _plain(value: Any) -> Any:
+    """JSON-friendly scalar for Optuna user attributes."""
+    if isinstance(value, bool) or value is None:
+        return value
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return str(value)
