@@ -118,3 +118,27 @@ def test_unsteppable_object_is_rejected():
 def test_bad_dt_is_rejected(dt):
     with pytest.raises(ValueError, match="dt="):
         advance_all([], dt)
+
+
+def test_run_many_ticks_matches_single_ticks():
+    model = mujoco.MjModel.from_xml_path(str(XML_PATH))
+    one, many = mujoco.MjData(model), mujoco.MjData(model)
+    for data in (one, many):
+        data.qvel[:] = 0.4
+        data.ctrl[0] = 0.7
+    single = Advancer([(model, one)], model.opt.timestep)
+    for i in range(25):
+        single(i * model.opt.timestep)
+    Advancer([(model, many)], model.opt.timestep).run(0.0, 25)
+    assert (one.qpos == many.qpos).all() and (one.qvel == many.qvel).all()
+    assert one.time == many.time
+
+
+def test_run_loops_over_generic_objects():
+    log: list = []
+    Advancer([Terrain(log), System(log)], 0.5).run(1.0, 2)
+    assert [entry for entry in log if entry[0].endswith("Synchronize")] == [
+        ("terrain.Synchronize", 1.0),
+        ("terrain.Synchronize", 1.5),
+    ]
+    assert sum(entry[0] == "system.DoStepDynamics" for entry in log) == 2

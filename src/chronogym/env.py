@@ -108,11 +108,8 @@ class SimEnv(gym.Env):
         task = self.task
         action = prepare_action(action, self.action_space, None, self.invalid_action)
         task.apply_action(action)
-        advance, dt = self._advance, self.dt
-        time = self.sim_time
-        for i in range(self.k):
-            advance(time + i * dt)
-        self.sim_time = time + self.k * dt
+        self._advance.run(self.sim_time, self.k)
+        self.sim_time += self.k * self.dt
         self.elapsed_steps += 1
         obs = task.observe()
         reward = float(task.reward(action, obs))
