@@ -59,3 +59,26 @@ class ExplodingCartPole(CartPoleTask):
         super().apply_action(action)
         if self.steps >= self.explode_at:
             self.data.qvel[:] = 1e300
+
+
+class HangingCartPole(CartPoleTask):
+    """Stops answering (sleeps) at step ``hang_at`` of its first episode."""
+
+    def __init__(self, hang_at: int = 3, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.hang_at = hang_at
+        self.steps = 0
+        self.episodes = 0
+
+    def reset(self, rng, options) -> None:
+        super().reset(rng, options)
+        self.steps = 0
+        self.episodes += 1
+
+    def apply_action(self, action: np.ndarray) -> None:
+        self.steps += 1
+        if self.episodes == 1 and self.steps == self.hang_at:
+            import time
+
+            time.sleep(600)
+        super().apply_action(action)

@@ -95,3 +95,27 @@ def test_crash_loop_becomes_a_clear_error():
     with pytest.raises(WorkerCrashLoopError, match=r"env 0 failed 3 times.*max_restarts=2"):
         for _ in range(200):
             vec.step(actions)
+
+
+def test_hung_worker_is_replaced_after_step_timeout(ray_cluster):
+    from faulty_tasks import HangingCartPole
+
+    from chronogym import SimEnv
+
+    vec = RayVectorEnv(
+        [partial(SimEnv, HangingCartPole(hang_at=3)), partial(SimEnv, HangingCartPole(hang_at=0))],
+        envs_per_worker=1,
+        step_timeout=2.0,
+    )
+    vec.reset(seed=0)
+    actions = np.zeros((2, 1), dtype=np.float32)
+    vec.step(actions)
+    vec.step(actions)
+    start = time.perf_counter()
+    _, _, _, truncated, info = vec.step(actions)  # env 0 hangs here
+    assert time.perf_counter() - start < 30
+    assert truncated.tolist() == [True, False]
+    assert "step_timeout=2.0" in info["worker_error"][0]
+    _, _, _, truncated, _ = vec.step(actions)  # the replacement answers: NEXT_STEP resets env 0
+    assert not truncated.any()
+    vec.close()
