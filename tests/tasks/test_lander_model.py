@@ -6,6 +6,7 @@ shared through module-scoped fixtures.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import mujoco
@@ -21,6 +22,7 @@ from chronogym.tasks.lander import (
     LanderSim,
     Terrain,
     build_lander_model,
+    leg_azimuths,
     simulate_landing,
 )
 
@@ -178,8 +180,25 @@ def test_absorber_vectorized_pure_force_and_damping() -> None:
 # --- model --------------------------------------------------------------------------------
 
 
-def test_model_has_25_bodies_and_the_joint_types() -> None:
-    info = build_lander_model(DEFAULT_DESIGN)
+def _corners_and_centre() -> list[LanderDesign]:
+    """The 8 corners of DESIGN_BOUNDS and its centre."""
+    names = list(DESIGN_BOUNDS)
+    corners = [
+        LanderDesign(**{n: DESIGN_BOUNDS[n][bit] for n, bit in zip(names, bits, strict=True)})
+        for bits in itertools.product((0, 1), repeat=len(names))
+    ]
+    centre = LanderDesign(**{n: 0.5 * sum(DESIGN_BOUNDS[n]) for n in names})
+    return [*corners, centre]
+
+
+@pytest.mark.parametrize(
+    "design",
+    _corners_and_centre(),
+    ids=lambda d: f"fy{d.f_y:.0f}-beta{math.degrees(d.beta):.0f}-a{math.degrees(d.alpha2):.0f}",
+)
+def test_model_has_25_bodies_and_the_joint_types(design: LanderDesign) -> None:
+    p = LanderParams()
+    info = build_lander_model(design, p)
     m = info.model
     assert m.nbody - 1 == 25  # world body excluded
     names = [m.body(i).name for i in range(1, m.nbody)]
@@ -191,18 +210,50 @@ def test_model_has_25_bodies_and_the_joint_types() -> None:
     assert types[mujoco.mjtJoint.mjJNT_HINGE] == 6  # revolute
     assert types[mujoco.mjtJoint.mjJNT_BALL] == 12  # spherical
     assert types[mujoco.mjtJoint.mjJNT_SLIDE] == 6  # prismatic
+    jtype = mujoco.mjtJoint
+    for i in range(6):  # each joint on the body the topology puts it on
+        for joint, body, kind in (
+            (f"hinge_{i}", f"upper_{i}", jtype.mjJNT_HINGE),
+            (f"slide_{i}", f"lower_{i}", jtype.mjJNT_SLIDE),
+            (f"pad_ball_{i}", f"pad_{i}", jtype.mjJNT_BALL),
+            (f"secondary_ball_{i}", f"secondary_{i}", jtype.mjJNT_BALL),
+        ):
+            assert m.jnt_type[m.joint(joint).id] == kind
+            assert m.jnt_bodyid[m.joint(joint).id] == m.body(body).id
+        assert m.body_parentid[m.body(f"upper_{i}").id] == info.chassis_body
+        assert m.body_parentid[m.body(f"secondary_{i}").id] == info.chassis_body
+        assert m.body_parentid[m.body(f"lower_{i}").id] == m.body(f"upper_{i}").id
+        assert m.body_parentid[m.body(f"pad_{i}").id] == m.body(f"lower_{i}").id
     assert m.neq == 6 and np.all(m.eq_type == mujoco.mjtEq.mjEQ_CONNECT)
     # only pads and the chassis can collide, never with each other
     colliding = {m.geom(i).name for i in range(m.ngeom) if m.geom_contype[i]}
     assert colliding == {f"pad_geom_{i}" for i in range(6)} | {"chassis_geom"}
     assert not np.any(m.geom_conaffinity[[*info.pad_geoms, info.chassis_geom]])
-    # loop closures satisfied in the initial configuration
+
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
+    # loop closures satisfied in the initial configuration
     eq_rows = d.efc_type[: d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-    assert np.abs(d.efc_pos[: d.nefc][eq_rows]).max() < 1e-9
-    # the body count does not depend on the terrain (rocks are static geoms)
+    assert eq_rows.sum() == 18 and np.abs(d.efc_pos[: d.nefc][eq_rows]).max() < 1e-9
+    # geometry follows theta: strut inclination alpha2, leg azimuths from beta, pads
+    # level and start_clearance above the ground
+    for i in range(6):
+        strut_up = d.xmat[m.body(f"upper_{i}").id].reshape(3, 3)[:, 2]
+        assert math.acos(strut_up[2]) == pytest.approx(design.alpha2, abs=1e-9)
+        pad = d.xpos[m.body(f"pad_{i}").id]
+        assert math.atan2(pad[1], pad[0]) % (2 * math.pi) == pytest.approx(
+            info.azimuths[i] % (2 * math.pi), abs=1e-9
+        )
+        assert d.xmat[m.body(f"pad_{i}").id].reshape(3, 3)[2, 2] == pytest.approx(1.0)
+    np.testing.assert_allclose(info.azimuths, leg_azimuths(design.beta))
+    pad_bottom = d.geom_xpos[info.pad_geoms, 2] - p.pad_half_thickness
+    np.testing.assert_allclose(pad_bottom, p.start_clearance, atol=1e-9)
+
+
+def test_body_count_does_not_depend_on_terrain() -> None:
+    m = build_lander_model(DEFAULT_DESIGN).model
     rocky = build_lander_model(DEFAULT_DESIGN, terrain=Terrain(n_rocks=5), seed=3).model
+    # rocks are static geoms of the world body
     assert rocky.nbody == m.nbody and rocky.ngeom == m.ngeom + 5
 
 

@@ -16,7 +16,8 @@ Modules:
   :class:`LanderParams` (every fixed parameter, documented);
 * :mod:`~chronogym.tasks.lander.absorber` -- :class:`HoneycombAbsorber`, the crush law;
 * :mod:`~chronogym.tasks.lander.model` -- the ``MjSpec`` model builder and its topology;
-* :mod:`~chronogym.tasks.lander.sim` -- :class:`LanderSim` and :func:`simulate_landing`.
+* :mod:`~chronogym.tasks.lander.sim` -- :class:`LanderSim` and :func:`simulate_landing`
+  (metrics, and the energy ledger whose terms are :data:`LEDGER_TERMS`).
 
 MuJoCo only: no Gymnasium, Ray or Optuna import here.
 """
@@ -37,12 +38,13 @@ from chronogym.tasks.lander.model import (
     build_lander_spec,
     leg_azimuths,
 )
-from chronogym.tasks.lander.sim import LanderSim, simulate_landing
+from chronogym.tasks.lander.sim import LEDGER_TERMS, LanderSim, simulate_landing
 
 __all__ = [
     "DEFAULT_DESIGN",
     "DESIGN_BOUNDS",
     "DESIGN_NAMES",
+    "LEDGER_TERMS",
     "N_LEGS",
     "HoneycombAbsorber",
     "LanderDesign",

@@ -39,9 +39,21 @@ A viscous term ``c * ds/dt`` is added while the honeycomb is loaded but *not* cr
 line.  The total force is capped by the yield force ``F_env(s_c + d_e)``, so the crush
 plateau stays at exactly ``f_y`` whatever the stroke rate.
 
-``absorbed_energy`` is the work dissipated by the absorber, per leg: the plastic work
-``int F_env(s_c + d_e) ds_c`` (trapezoidal over each crush increment, so a plateau crush
-gives exactly ``f_y * crushed length``) plus the work of the viscous term.
+``absorbed_energy`` is the work dissipated by the absorber, per leg: the plastic
+dissipation plus the work of the viscous term.  The plastic dissipation is the work put
+in minus the growth of the stored elastic energy ``E_el = k(s_c) (s - s_c)^2 / 2``.
+Because the elastic stiffness ``k(s_c) = F_env(s_c + d_e) / d_e`` rises with the crush,
+the stored energy on the crush branch (``F_env d_e / 2``) grows in densification, and
+that growth is not dissipated::
+
+    dE_diss = (F_env(s_c + d_e) - F_env'(s_c + d_e) d_e / 2) ds_c
+
+integrated exactly per crush increment as the trapezoid of ``F_env`` times ``ds_c``
+minus ``d_e / 2`` times the rise of ``F_env``.  A plateau crush gives exactly ``f_y *
+crushed length`` at any step size; in densification the correction is at most
+``(F_env(s) - f_y) d_e / 2`` per leg (12 J for a 1 kN cartridge crushed onto its stop),
+and without it the account would exceed the work put in by that much -- energy that
+comes back out on unloading.
 
 The class holds per-leg NumPy state and works on arrays of strokes, so one call
 serves all six legs.  In the simulation loop call :meth:`update` once per physics tick
@@ -133,6 +145,8 @@ class HoneycombAbsorber:
         self.max_stroke_reached = np.zeros(n)
         #: force returned by the last :meth:`update` [N]
         self.last_force = np.zeros(n)
+        #: elastic (spring) part of ``last_force``, without the viscous term [N]
+        self.last_elastic_force = np.zeros(n)
         self._last_stroke = np.zeros(n)  # the strut starts at zero stroke
         self._last_damping_force = np.zeros(n)
 
@@ -193,10 +207,13 @@ class HoneycombAbsorber:
         last = self._last_stroke
         dissipated = self._last_damping_force * (s - last)
         if d_crush.any():
-            # trapezoid along the envelope over the crush increment; on the plateau both
-            # ends are f_y, so the plastic work is exactly f_y * d_crush at any step size
+            # trapezoid along the envelope over the crush increment, less the growth of
+            # the elastic energy stored at full stretch d_e (see the module docstring);
+            # on the plateau both ends are f_y: exactly f_y * d_crush at any step size
             env_prev = self.envelope(self.crush_stroke + self.elastic_stroke)
-            plastic = 0.5 * (env + env_prev) * d_crush
+            plastic = 0.5 * (env + env_prev) * d_crush - 0.5 * self.elastic_stroke * (
+                env - env_prev
+            )
             self.plastic_energy += plastic
             dissipated += plastic
         self.absorbed_energy += dissipated
@@ -206,14 +223,18 @@ class HoneycombAbsorber:
         self._last_stroke = s
         self._last_damping_force = force - elastic
         self.last_force = force
+        self.last_elastic_force = elastic
         return force
 
     # --- derived ----------------------------------------------------------------------
     @property
     def elastic_energy(self) -> np.ndarray:
-        """Recoverable energy stored on the elastic line at the last update [J]."""
+        """Recoverable energy stored on the elastic line at the last update [J]:
+        ``F_el^2 / (2 k)`` of the spring part only (the viscous part of ``last_force``
+        stores nothing; at touchdown it can saturate the force at the yield force while
+        the spring is still nearly relaxed)."""
         stiffness = self.envelope(self.crush_stroke + self.elastic_stroke) / self.elastic_stroke
-        return 0.5 * self.last_force**2 / stiffness
+        return 0.5 * self.last_elastic_force**2 / stiffness
 
     @property
     def bottomed_out(self) -> np.ndarray:

@@ -52,6 +52,11 @@ joint's action-reaction, the cylinder up).  This is cleaner than actuators: no c
 ranges or gains to keep consistent with the crush law, and ``ctrl`` stays free for a
 later controller.
 
+The model enables ``mjENBL_ENERGY`` (``data.energy`` = potential and kinetic energy,
+computed at the start of every step) for the energy ledger of ``LanderSim`` (sim.py);
+contacts use the elliptic friction cone, whose constraint rows split into one normal row
+and two friction rows, which the ledger books apart.
+
 Terrain (:class:`Terrain`): an infinite rigid plane, optionally inclined by ``slope``
 (downhill towards world +x), with optional rocks (spheres and boxes, partly buried,
 placed by a seeded generator over the ring where the pads land).  Rocks are static
@@ -281,6 +286,8 @@ def build_lander_spec(
     spec.option.gravity = [0.0, 0.0, -p.gravity]
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    # data.energy (potential, kinetic) at every step, for the energy ledger of LanderSim
+    spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_ENERGY
     spec.compiler.degree = False
 
     # --- terrain ----------------------------------------------------------------------
