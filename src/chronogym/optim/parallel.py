@@ -81,6 +81,9 @@ class StudyReport:
     retried: int = 0
     recovered: int = 0
     elapsed: float = 0.0
+    """Seconds from the first trial to the last (worker start-up excluded)."""
+    startup: float = 0.0
+    """Seconds to start the workers (and build their evaluators)."""
     best_value: float | None = None
     best_params: dict[str, Any] = field(default_factory=dict)
     best_attrs: dict[str, Any] = field(default_factory=dict)
@@ -269,6 +272,8 @@ def run_parallel_study(
         if backend == "serial"
         else _RayPool(evaluator_factory, workers, num_cpus, address)
     )
+    report.startup = time.perf_counter() - start
+    start = time.perf_counter()  # history and elapsed count from the first trial on
     if pool_hook is not None:
         pool_hook(pool)
     bar = tqdm(
