@@ -27,6 +27,7 @@ class Quadratic:
     marker: str = ""
     delay: float = 0.0
     always_die: bool = False
+    hang_above: float = 2.0
 
     def __call__(self):
         def evaluate(params):
@@ -37,6 +38,8 @@ class Quadratic:
                 if self.marker:
                     Path(self.marker).write_text(str(os.getpid()))
                 os.kill(os.getpid(), signal.SIGKILL)
+            if x > self.hang_above:
+                time.sleep(600)
             if x > self.fail_above:
                 raise TrialFailure(f"x={x:.3f} is in the failing region")
             return (x - 0.3) ** 2, {"x_seen": x}

@@ -182,3 +182,23 @@ def test_lander_evaluator_reuses_its_simulation():
     again, _ = evaluator({"f_y": 4000.0, "beta": 1.0, "alpha2": 0.5})
     assert evaluator.sim is sim and value == again and math.isfinite(value)
     assert attrs["E_init"] > 0 and 0 < attrs["max_stroke"] < 0.35
+
+
+def test_hung_worker_is_replaced_after_trial_timeout(ray_cluster, tmp_path):
+    study = new_study(tmp_path)
+    study.enqueue_trial({"x": 0.95})
+    report = run_parallel_study(
+        study,
+        suggest_x,
+        Quadratic(hang_above=0.9),
+        4,
+        workers=2,
+        max_retries=0,
+        trial_timeout=3.0,
+        progress=False,
+    )
+    first = study.trials[0]
+    assert first.state.name == "FAIL"
+    assert "trial_timeout=3.0" in first.user_attrs["fail_reason"]
+    assert report.failed >= 1 and len(report.history) == report.completed + report.failed
+    assert "RUNNING" not in states(study)

@@ -286,6 +286,36 @@ def run_parallel_study(
     inflight: dict[Any, _Inflight] = {}
     free = deque(range(workers))
     to_ask = max(remaining, 0)
+
+    def record(job: _Inflight, status: str, payload: Any, attrs: Any) -> None:
+        """Tell the study a trial's final state and free its worker."""
+        if status == "ok":
+            for key, value in (attrs or {}).items():
+                job.trial.set_user_attr(key, value)
+            study.tell(job.trial, payload)
+            report.completed += 1
+        else:
+            _tell_fail(study, job.trial, payload)
+            report.failed += 1
+        free.append(job.worker)
+        best = _best_value(study)
+        value = payload if status == "ok" else None
+        report.history.append((time.perf_counter() - start, job.trial.number, value, best))
+        bar.update(1)
+        if best is not None:
+            bar.set_postfix_str(f"best J {best:.4g}")
+
+    def recover(job: _Inflight, reason: str) -> None:
+        """Replace a lost worker; retry its trial there, or record it failed."""
+        pool.replace(job.worker)
+        if job.attempt < max_retries:
+            report.retried += 1
+            job.attempt += 1
+            job.started = time.perf_counter()
+            inflight[pool.submit(job.worker, job.params)] = job
+        else:
+            record(job, "fail", f"worker lost {job.attempt + 1} times: {reason}", None)
+
     try:
         while to_ask > 0 or inflight:
             while free and to_ask > 0:
@@ -295,41 +325,22 @@ def run_parallel_study(
                 handle = pool.submit(worker, params)
                 inflight[handle] = _Inflight(trial, params, worker, 0, time.perf_counter())
                 to_ask -= 1
-            timeout = _next_timeout(inflight, trial_timeout)
-            ready = pool.wait_one(timeout)
-            if not ready:
-                _replace_hung(pool, inflight, trial_timeout, report, study, free, max_retries)
+            ready = pool.wait_one(_next_timeout(inflight, trial_timeout))
+            if not ready:  # a trial ran past trial_timeout: its worker is hung
+                for handle, job in _overdue(inflight, trial_timeout):
+                    del inflight[handle]
+                    if hasattr(pool, "forget"):
+                        pool.forget(handle)
+                    recover(job, f"no result within trial_timeout={trial_timeout} s")
                 continue
             for handle in ready:
                 job = inflight.pop(handle)
                 try:
-                    status, payload, attrs = pool.result(handle)
+                    outcome = pool.result(handle)
                 except WorkerLost as lost:
-                    pool.replace(job.worker)
-                    if job.attempt < max_retries:
-                        report.retried += 1
-                        job.attempt += 1
-                        job.started = time.perf_counter()
-                        inflight[pool.submit(job.worker, job.params)] = job
-                        continue
-                    _tell_fail(study, job.trial, f"worker lost {job.attempt + 1} times: {lost}")
-                    report.failed += 1
+                    recover(job, str(lost))
                 else:
-                    if status == "ok":
-                        for key, value in (attrs or {}).items():
-                            job.trial.set_user_attr(key, value)
-                        study.tell(job.trial, payload)
-                        report.completed += 1
-                    else:
-                        _tell_fail(study, job.trial, payload)
-                        report.failed += 1
-                free.append(job.worker)
-                value = payload if status == "ok" else None
-                best = _best_value(study)
-                report.history.append((time.perf_counter() - start, job.trial.number, value, best))
-                bar.update(1)
-                if best is not None:
-                    bar.set_postfix_str(f"best J {best:.4g}")
+                    record(job, *outcome)
     finally:
         bar.close()
         for job in inflight.values():  # interrupted: never leave trials RUNNING
@@ -377,22 +388,11 @@ def _next_timeout(inflight: dict[Any, _Inflight], trial_timeout: float | None) -
     return max(0.0, oldest + trial_timeout - time.perf_counter())
 
 
-def _replace_hung(pool, inflight, trial_timeout, report, study, free, max_retries) -> None:
-    """Replace the workers whose trial ran past ``trial_timeout``; retry or fail the trial."""
+def _overdue(
+    inflight: dict[Any, _Inflight], trial_timeout: float | None
+) -> list[tuple[Any, _Inflight]]:
+    """The in-flight trials that have run longer than ``trial_timeout``."""
+    if trial_timeout is None:
+        return []
     now = time.perf_counter()
-    for handle, job in list(inflight.items()):
-        if trial_timeout is None or now - job.started < trial_timeout:
-            continue
-        del inflight[handle]
-        if hasattr(pool, "forget"):
-            pool.forget(handle)
-        pool.replace(job.worker)
-        if job.attempt < max_retries:
-            report.retried += 1
-            job.attempt += 1
-            job.started = time.perf_counter()
-            inflight[pool.submit(job.worker, job.params)] = job
-        else:
-            _tell_fail(study, job.trial, f"no result within trial_timeout={trial_timeout} s")
-            report.failed += 1
-            free.append(job.worker)
+    return [(h, job) for h, job in inflight.items() if now - job.started >= trial_timeout]
