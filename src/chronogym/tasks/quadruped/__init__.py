@@ -4,42 +4,5 @@
 keyframe; the constants describe its joint order (FR, FL, RR, RL; hip, thigh, calf per leg).
 """
 
-from chronogym.tasks.quadruped.model import (
-    ACTUATOR_NAMES,
-    BASE_BODY_NAME,
-    CAMERA_NAME,
-    DEFAULT_JOINT_POS,
-    FOOT_GEOM_NAMES,
-    FOOT_SITE_NAMES,
-    HOME_BASE_HEIGHT,
-    HOME_KEYFRAME,
-    IMU_SITE_NAME,
-    JOINT_NAMES,
-    JOINT_VELOCITY_LIMITS,
-    KP,
-    KV,
-    LEG_NAMES,
-    TORQUE_LIMITS,
-    go1_xml_path,
-    load_go1,
-)
-
-__all__ = [
-    "ACTUATOR_NAMES",
-    "BASE_BODY_NAME",
-    "CAMERA_NAME",
-    "DEFAULT_JOINT_POS",
-    "FOOT_GEOM_NAMES",
-    "FOOT_SITE_NAMES",
-    "HOME_BASE_HEIGHT",
-    "HOME_KEYFRAME",
-    "IMU_SITE_NAME",
-    "JOINT_NAMES",
-    "JOINT_VELOCITY_LIMITS",
-    "KP",
-    "KV",
-    "LEG_NAMES",
-    "TORQUE_LIMITS",
-    "go1_xml_path",
-    "load_go1",
-]
+from chronogym.tasks.quadruped.model import *  # noqa: F403  (re-exported names)
+from chronogym.tasks.quadruped.model import __all__ as __all__
