@@ -129,3 +129,16 @@ def test_package_import_is_light():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
     assert {"SimEnv", "RayVectorEnv", "Task", "advance_all"} <= set(chronogym.__all__)
+
+
+def test_divergence_check_reads_the_right_mujoco_warning_counters():
+    import mujoco
+
+    from chronogym.engines import mujoco as engine
+
+    warning = mujoco.mjtWarning
+    assert (
+        int(warning.mjWARN_BADQPOS),
+        int(warning.mjWARN_BADQVEL),
+        int(warning.mjWARN_BADQACC),
+    ) == (engine._BADQPOS, engine._BADQVEL, engine._BADQACC)

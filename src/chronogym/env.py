@@ -41,7 +41,8 @@ class SimEnv(gym.Env):
     ``step(a)`` = ``task.apply_action(a)``, then ``task.k`` ticks of the
     advance operator with ``task.dt``, then observe / reward / terminated /
     truncated. The episode is truncated after ``max_episode_steps`` steps
-    (argument, else ``task.max_episode_steps``). A NaN/Inf observation or
+    (argument, else ``task.max_episode_steps``; the value in force is written back
+    to ``task.max_episode_steps``). A NaN/Inf observation or
     reward, or ``task.diverged()``, ends the episode with ``terminated=True``
     and ``info["diverged"] = True``; non-finite values are then replaced by 0.
     """
@@ -76,6 +77,7 @@ class SimEnv(gym.Env):
         self.max_episode_steps = (
             max_episode_steps if max_episode_steps is not None else task.max_episode_steps
         )
+        task.max_episode_steps = self.max_episode_steps  # the task sees the horizon it runs under
         fps = task.render_fps or 1.0 / (self.dt * self.k)
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": fps}
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:

@@ -13,6 +13,7 @@ NAMESPACE = "chronogym"
 
 TASKS: dict[str, str] = {
     "CartPole-v0": "chronogym.tasks.cartpole:CartPoleTask",
+    "Go1Velocity-v0": "chronogym.tasks.quadruped.task:Go1VelocityTask",
 }
 
 

@@ -30,22 +30,19 @@ def check_headless_gl() -> None:
         )
 
 
+# mjtWarning indices of mjWARN_BADQPOS, mjWARN_BADQVEL and mjWARN_BADQACC (stable in the C API).
+_BADQPOS, _BADQVEL, _BADQACC = 3, 4, 5
+
+
 def mujoco_diverged(data: Any) -> bool:
     """True when MuJoCo flagged an unstable state or qpos/qvel hold NaN/Inf.
 
     MuJoCo resets a diverged simulation to qpos0 by itself and only counts a
     warning, so the warning counters are the reliable signal.
     """
-    import mujoco
-
-    warnings = data.warning
-    for kind in (
-        mujoco.mjtWarning.mjWARN_BADQPOS,
-        mujoco.mjtWarning.mjWARN_BADQVEL,
-        mujoco.mjtWarning.mjWARN_BADQACC,
-    ):
-        if warnings[kind].number > 0:
-            return True
+    counts = data.warning.number
+    if counts[_BADQPOS] or counts[_BADQVEL] or counts[_BADQACC]:
+        return True
     return not (np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all())
 
 

@@ -1,8 +1,29 @@
-"""Quadruped tasks: a mesh-free MuJoCo model of the Unitree Go1 (12 DoF).
+"""Quadruped tasks: a mesh-free MuJoCo model of the Unitree Go1 (12 DoF) and velocity tracking.
 
 ``load_go1()`` compiles the bundled ``go1.xml`` and returns ``(model, data)`` at the ``home``
 keyframe; the constants describe its joint order (FR, FL, RR, RL; hip, thigh, calf per leg).
+``Go1VelocityTask`` (Gymnasium id ``chronogym/Go1Velocity-v0``) is the paper's locomotion task.
 """
 
+from chronogym.tasks.quadruped.config import (
+    OBS_DIM,
+    OBS_SCALES,
+    OBS_SLICES,
+    CommandRanges,
+    DomainRandomization,
+    RewardWeights,
+)
 from chronogym.tasks.quadruped.model import *  # noqa: F403  (re-exported names)
-from chronogym.tasks.quadruped.model import __all__ as __all__
+from chronogym.tasks.quadruped.model import __all__ as _model_names
+from chronogym.tasks.quadruped.task import Go1VelocityTask
+
+__all__ = [
+    *_model_names,
+    "OBS_DIM",
+    "OBS_SCALES",
+    "OBS_SLICES",
+    "CommandRanges",
+    "DomainRandomization",
+    "Go1VelocityTask",
+    "RewardWeights",
+]

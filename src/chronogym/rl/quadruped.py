@@ -1,0 +1,116 @@
+"""Case study 1 end to end: train the Go1 velocity tracker with PPO, then play it back.
+
+``chronogym train quadruped`` and ``chronogym play quadruped`` are thin wrappers over
+:func:`make_quadruped_vec_env`, :func:`train_quadruped` and :func:`play_quadruped`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+ENV_ID = "chronogym/Go1Velocity-v0"
+TERRAINS = ("rigid",)
+BACKENDS = ("ray", "serial")
+
+
+def env_kwargs_for(terrain: str) -> dict[str, Any]:
+    """Keyword arguments of the task for a terrain name."""
+    if terrain not in TERRAINS:
+        raise ValueError(f"terrain={terrain!r}: expected one of {TERRAINS}")
+    return {}
+
+
+def make_quadruped_vec_env(
+    num_envs: int,
+    backend: str = "ray",
+    *,
+    terrain: str = "rigid",
+    envs_per_worker: int | None = None,
+    address: str | None = None,
+    **vector_kwargs: Any,
+) -> Any:
+    """``num_envs`` Go1 envs batched by ``backend`` ("ray" or "serial", the no-Ray baseline),
+    with Gymnasium's SAME_STEP autoreset that RSL-RL needs."""
+    import gymnasium as gym
+
+    from chronogym.vector.factory import make_vec
+
+    if backend not in BACKENDS:
+        raise ValueError(f"backend={backend!r}: expected one of {BACKENDS}")
+    if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+        raise ValueError(f"num_envs={num_envs!r}: expected an integer >= 1")
+    kwargs: dict[str, Any] = {
+        "autoreset_mode": gym.vector.AutoresetMode.SAME_STEP,
+        "env_kwargs": env_kwargs_for(terrain),
+        **vector_kwargs,
+    }
+    if backend == "ray":
+        kwargs.update(envs_per_worker=envs_per_worker, address=address)
+    return make_vec(ENV_ID, num_envs, backend=backend, **kwargs)
+
+
+def play_quadruped(
+    checkpoint: str | Path,
+    *,
+    commands: Any = None,
+    episodes: int = 1,
+    seed: int = 0,
+    video: str | Path | None = None,
+    terrain: str = "rigid",
+    max_episode_steps: int | None = None,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Roll the checkpoint's policy out for each command; return the summary rows.
+
+    With ``video`` the first episode of every command is rendered offscreen (needs an
+    OpenGL backend: EGL, or OSMesa with ``MUJOCO_GL=osmesa``) into one MP4/GIF.
+    """
+    import gymnasium as gym
+
+    import chronogym  # noqa: F401  (registers ids, picks a headless GL backend)
+    from chronogym.rl.evaluate import DEFAULT_COMMANDS, evaluate, summarize
+    from chronogym.rl.trainer import load_policy
+
+    render_mode = "rgb_array" if video is not None else None
+    if video is not None:
+        check_can_render()
+    env = gym.make(
+        ENV_ID,
+        render_mode=render_mode,
+        max_episode_steps=max_episode_steps,
+        **env_kwargs_for(terrain),
+    )
+    try:
+        policy = load_policy(checkpoint, env.observation_space.shape[0], env.action_space.shape[0])
+        results = evaluate(
+            env,
+            policy,
+            commands=commands or DEFAULT_COMMANDS,
+            episodes=episodes,
+            seed=seed,
+            video=video,
+            progress=progress,
+        )
+    finally:
+        env.close()
+    return summarize(results)
+
+
+def check_can_render() -> None:
+    """Raise RuntimeError naming the GL backends to install when offscreen rendering fails."""
+    import mujoco
+
+    from chronogym.engines.mujoco import check_headless_gl
+
+    check_headless_gl()
+    try:
+        model = mujoco.MjModel.from_xml_string("<mujoco><worldbody/></mujoco>")
+        with mujoco.Renderer(model, 8, 8) as renderer:
+            renderer.render()
+    except Exception as error:  # GL context creation fails in many library-specific ways
+        raise RuntimeError(
+            f"offscreen rendering is unavailable ({type(error).__name__}: {error}); "
+            "install EGL (apt install libegl1 libgl1-mesa-dri) or OSMesa "
+            "(apt install libosmesa6, then MUJOCO_GL=osmesa), or run without --video"
+        ) from error

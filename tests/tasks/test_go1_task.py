@@ -1,0 +1,285 @@
+"""Go1 velocity tracking: observation layout and scales, reward-term signs, termination, logs."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import chronogym  # noqa: F401  (registers the ids)
+from chronogym.env import SimEnv
+from chronogym.tasks.quadruped import (
+    DEFAULT_JOINT_POS,
+    OBS_DIM,
+    OBS_SCALES,
+    OBS_SLICES,
+    CommandRanges,
+    DomainRandomization,
+    Go1VelocityTask,
+    RewardWeights,
+)
+
+COMMAND = (0.5, -0.2, 0.3)
+
+
+def _env(**kwargs) -> SimEnv:
+    env = SimEnv(Go1VelocityTask(**kwargs))
+    env.reset(seed=0, options={"command": COMMAND})
+    return env
+
+
+def _set_state(task: Go1VelocityTask, *, lin_vel=(0, 0, 0), ang_vel=(0, 0, 0), quat=None):
+    """Put the base at its home height with the given world velocities, then observe."""
+    data = task.data
+    if quat is not None:
+        data.qpos[3:7] = quat
+    data.qvel[0:3] = lin_vel
+    data.qvel[3:6] = ang_vel
+    task.forward()
+    return task.observe()
+
+
+def _quat_from_yaw(yaw: float) -> np.ndarray:
+    return np.array([math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)])
+
+
+def test_spaces_and_registered_id():
+    env = gym.make("chronogym/Go1Velocity-v0")
+    assert env.observation_space.shape == (OBS_DIM,) == (45,)
+    assert env.observation_space.dtype == np.float32
+    assert env.action_space.shape == (12,)
+    obs, _ = env.reset(seed=3)
+    assert obs.shape == (45,) and obs.dtype == np.float32
+    assert env.unwrapped.control_dt == pytest.approx(0.02)
+    env.close()
+
+
+def test_observation_slices_hold_each_scaled_group():
+    env = _env(reset_joint_noise=0.0)
+    task = env.task
+    data = task.data
+    data.qpos[7:] = DEFAULT_JOINT_POS + np.linspace(-0.1, 0.1, 12)
+    data.qvel[6:] = np.linspace(1.0, 12.0, 12)
+    task.last_action[:] = np.arange(12) / 10
+    obs = _set_state(task, ang_vel=(0.4, -0.8, 1.2), quat=_quat_from_yaw(0.0))
+
+    def group(name):
+        start, stop = OBS_SLICES[name]
+        return obs[start:stop]
+
+    np.testing.assert_allclose(group("base_ang_vel"), np.array([0.4, -0.8, 1.2]) * 0.25, rtol=1e-6)
+    np.testing.assert_allclose(group("projected_gravity"), [0, 0, -1], atol=1e-6)
+    np.testing.assert_allclose(group("command"), np.array(COMMAND) * OBS_SCALES["command"], 1e-6)
+    np.testing.assert_allclose(group("joint_pos"), np.linspace(-0.1, 0.1, 12), atol=1e-6)
+    np.testing.assert_allclose(group("joint_vel"), np.linspace(1.0, 12.0, 12) * 0.05, rtol=1e-6)
+    np.testing.assert_allclose(group("last_action"), np.arange(12) / 10, rtol=1e-6)
+    assert sum(stop - start for start, stop in OBS_SLICES.values()) == OBS_DIM
+
+
+def test_projected_gravity_follows_roll_and_velocity_is_in_body_frame():
+    env = _env()
+    task = env.task
+    roll = 0.3
+    quat = np.array([math.cos(roll / 2), math.sin(roll / 2), 0, 0])
+    obs = _set_state(task, quat=quat)
+    start = OBS_SLICES["projected_gravity"][0]
+    np.testing.assert_allclose(obs[start : start + 3], [0, -math.sin(roll), -math.cos(roll)], 1e-6)
+    # Heading 90 deg left: a world +y velocity is forward (+x) in the body frame.
+    _set_state(task, lin_vel=(0, 0.7, 0), quat=_quat_from_yaw(math.pi / 2))
+    np.testing.assert_allclose(task.base_lin_vel, [0.7, 0, 0], atol=1e-9)
+
+
+def test_action_maps_to_scaled_offsets_from_the_default_pose():
+    env = _env(action_scale=0.25)
+    action = np.full(12, 0.4, dtype=np.float32)
+    env.step(action)
+    np.testing.assert_allclose(env.task.data.ctrl, DEFAULT_JOINT_POS + 0.1, rtol=1e-6)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.full(12, np.nan, dtype=np.float32))
+
+
+def _terms(task: Go1VelocityTask) -> dict[str, float]:
+    task._update_contacts()
+    return task.compute_reward_terms()
+
+
+def test_tracking_terms_are_positive_and_peak_on_the_command():
+    env = _env()
+    task = env.task
+    _set_state(task, lin_vel=(0.5, -0.2, 0), ang_vel=(0, 0, 0.3), quat=(1, 0, 0, 0))
+    on = _terms(task)
+    _set_state(task, lin_vel=(-0.5, 0.4, 0), ang_vel=(0, 0, -0.6))
+    off = _terms(task)
+    dt = task.control_dt
+    assert on["tracking_lin_vel"] == pytest.approx(1.0 * dt)
+    assert on["tracking_ang_vel"] == pytest.approx(0.5 * dt)
+    assert 0 < off["tracking_lin_vel"] < on["tracking_lin_vel"]
+    assert 0 < off["tracking_ang_vel"] < on["tracking_ang_vel"]
+
+
+@pytest.mark.parametrize(
+    ("term", "state"),
+    [
+        ("lin_vel_z", {"lin_vel": (0, 0, 0.5)}),
+        ("ang_vel_xy", {"ang_vel": (1.0, -1.0, 0)}),
+        ("orientation", {"quat": (math.cos(0.15), math.sin(0.15), 0, 0)}),
+    ],
+)
+def test_penalties_are_negative_when_violated_and_zero_at_rest(term, state):
+    env = _env(reset_joint_noise=0.0)
+    task = env.task
+    _set_state(task, quat=(1, 0, 0, 0))
+    assert _terms(task)[term] == pytest.approx(0.0, abs=1e-12)
+    _set_state(task, **state)
+    assert _terms(task)[term] < 0
+
+
+def test_height_posture_action_rate_and_torque_penalties():
+    env = _env(reset_joint_noise=0.0)
+    task = env.task
+    task.data.qpos[2] = task.base_height_target
+    _set_state(task)
+    rest = _terms(task)
+    assert rest["base_height"] == pytest.approx(0.0, abs=1e-12)
+    assert rest["joint_posture"] == pytest.approx(0.0, abs=1e-12)
+    task.data.qpos[2] = task.base_height_target - 0.1
+    task.data.qpos[7:] = DEFAULT_JOINT_POS + 0.2
+    task.prev_action[:] = 0.0
+    task.last_action[:] = 1.0
+    mujoco.mj_step(task.model, task.data)  # actuator forces for the new targets
+    _set_state(task)
+    moved = _terms(task)
+    assert moved["base_height"] < 0
+    assert moved["joint_posture"] < 0
+    assert moved["action_rate"] == pytest.approx(-0.01 * 12 * task.control_dt)
+    assert moved["torques"] < 0
+
+
+def test_feet_air_time_rewards_long_swings_and_ignores_standing_commands():
+    env = _env(reset_joint_noise=0.0)
+    task = env.task
+    task._update_contacts()
+    assert task.feet_contact_now.all(), "all four feet touch the ground at home"
+    task.feet_contact[:] = False
+    task.feet_air_time[:] = 0.5  # swung for 0.5 s, longer than the 0.25 s threshold
+    assert _terms(task)["feet_air_time"] > 0
+    task.feet_contact[:] = False
+    task.feet_air_time[:] = 0.05  # a shuffle
+    assert _terms(task)["feet_air_time"] < 0
+    env.reset(seed=0, options={"command": (0.0, 0.0, 0.5)})
+    task.feet_contact[:] = False
+    task.feet_air_time[:] = 0.5
+    assert _terms(task)["feet_air_time"] == 0.0
+
+
+def test_zero_weight_switches_a_term_off():
+    env = _env(rewards=RewardWeights(torques=0.0, feet_air_time=0.0))
+    _, _, _, _, _ = env.step(np.zeros(12, dtype=np.float32))
+    assert "torques" not in env.task.reward_terms
+    assert "tracking_lin_vel" in env.task.reward_terms
+
+
+def test_reward_is_never_negative_unless_asked():
+    env = _env()
+    task = env.task
+    _set_state(task, lin_vel=(-1.0, 1.0, 1.0), ang_vel=(3.0, 3.0, 0))
+    assert sum(_terms(task).values()) < 0
+    assert task.reward(np.zeros(12), task.observe()) == 0.0
+    raw = _env(only_positive_rewards=False)
+    _set_state(raw.task, lin_vel=(-1.0, 1.0, 1.0), ang_vel=(3.0, 3.0, 0))
+    assert raw.task.reward(np.zeros(12), raw.task.observe()) < 0
+
+
+def test_tipped_robot_terminates_and_logs_its_episode():
+    env = _env()
+    roll = 1.3  # past the 1.0 rad tilt limit
+    env.task.data.qpos[3:7] = (math.cos(roll / 2), math.sin(roll / 2), 0, 0)
+    env.task.forward()
+    _, _, terminated, truncated, info = env.step(np.zeros(12, dtype=np.float32))
+    assert terminated and not truncated
+    assert info["log"]["/metrics/survived"] == 0.0
+    assert info["log"]["/metrics/episode_length_s"] == pytest.approx(0.02)
+
+
+def test_base_on_the_ground_terminates():
+    env = _env()
+    env.task.data.qpos[2] = 0.03  # trunk resting on the floor
+    env.task.forward()
+    _, _, terminated, _, _ = env.step(np.zeros(12, dtype=np.float32))
+    assert terminated
+
+
+def test_standing_still_survives_and_reports_episode_means_at_the_time_limit():
+    env = SimEnv(Go1VelocityTask(max_episode_steps=25))
+    env.reset(seed=1, options={"command": (0.0, 0.0, 0.0)})
+    for step in range(25):
+        _, reward, terminated, truncated, info = env.step(np.zeros(12, dtype=np.float32))
+        assert not terminated
+        assert reward >= 0
+        assert ("log" in info) == (step == 24)
+    assert truncated
+    log = info["log"]
+    assert log["/metrics/survived"] == 1.0
+    assert log["/metrics/x_vel_mse"] < 0.01 and log["/metrics/y_vel_mse"] < 0.01
+    assert log["/reward/tracking_lin_vel"] > 0.9 * 25 * 0.02
+    assert {f"/reward/{name}" for name in RewardWeights().active()} <= set(log)
+
+
+def test_commands_come_from_the_configured_ranges():
+    env = SimEnv(Go1VelocityTask(commands=CommandRanges(vx=(0.4, 0.6), vy=(0, 0), yaw_rate=(0, 0))))
+    for seed in range(5):
+        env.reset(seed=seed)
+        assert 0.4 <= env.task.command[0] <= 0.6
+        assert env.task.command[1] == 0 and env.task.command[2] == 0
+    with pytest.raises(ValueError, match="command"):
+        env.reset(options={"command": (1.0, 2.0)})
+
+
+def test_domain_randomization_is_off_by_default_and_stays_in_range():
+    plain = _env()
+    floor = plain.task.model.geom("floor").id
+    assert plain.task.model.geom_friction[floor, 0] == 1.0
+    randomized = SimEnv(Go1VelocityTask(randomization=DomainRandomization(friction=(0.5, 0.6))))
+    trunk_mass = []
+    for seed in range(3):
+        randomized.reset(seed=seed)
+        model = randomized.task.model
+        assert 0.5 <= model.geom_friction[model.geom("floor").id, 0] <= 0.6
+        trunk_mass.append(float(model.body_mass[model.body("trunk").id]))
+    assert len(set(trunk_mass)) == 3 and all(4.2 <= m <= 6.3 for m in trunk_mass)
+
+
+def test_pushes_kick_the_base_at_the_interval():
+    dr = DomainRandomization(friction=None, added_base_mass=None, push_interval_s=0.04)
+    env = SimEnv(Go1VelocityTask(randomization=dr))
+    env.reset(seed=0, options={"command": (0, 0, 0)})
+    env.step(np.zeros(12, dtype=np.float32))
+    before = env.task.data.qvel[0:2].copy()
+    env.step(np.zeros(12, dtype=np.float32))  # step 2 = 0.04 s: pushed
+    assert np.abs(env.task.data.qvel[0:2] - before).max() > 0.05
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"action_scale": 0.0}, "action_scale"),
+        ({"max_tilt": float("nan")}, "max_tilt"),
+        ({"cone": "round"}, "cone"),
+        ({"reset_joint_noise": 2.0}, "reset_joint_noise"),
+    ],
+)
+def test_bad_settings_name_the_value(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        Go1VelocityTask(**kwargs)
+
+
+def test_bad_config_values_name_the_field():
+    with pytest.raises(ValueError, match="vx"):
+        CommandRanges(vx=(1.0, -1.0))
+    with pytest.raises(ValueError, match="torques"):
+        RewardWeights(torques=float("inf"))
+    with pytest.raises(ValueError, match="friction"):
+        DomainRandomization(friction=(0.0, 1.0))
