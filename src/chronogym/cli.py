@@ -158,6 +158,83 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train the Go1 velocity tracker with PPO (RSL-RL) on Ray workers or serially."""
+    from chronogym.rl.quadruped import train_quadruped
+
+    if args.num_envs < 1:
+        raise SystemExit(f"--num-envs={args.num_envs}: expected an integer >= 1")
+    if args.iterations is None and args.minutes is None:
+        raise SystemExit("chronogym train: give --iterations I, --minutes M, or both")
+    if args.iterations is not None and args.iterations < 1:
+        raise SystemExit(f"--iterations={args.iterations}: expected an integer >= 1")
+    if args.minutes is not None and not args.minutes > 0:
+        raise SystemExit(f"--minutes={args.minutes}: expected a number > 0")
+    if args.torch_threads < 1:
+        raise SystemExit(f"--torch-threads={args.torch_threads}: expected an integer >= 1")
+    if args.resume is not None and not os.path.isfile(args.resume):
+        raise SystemExit(f"--resume={args.resume}: no such checkpoint file")
+    print(
+        f"chronogym train quadruped: {args.num_envs} envs on the {args.backend} backend, "
+        f"{args.terrain} terrain, writing to {args.out}"
+        + (f", resuming {args.resume}" if args.resume else "")
+    )
+    result = train_quadruped(
+        args.out,
+        num_envs=args.num_envs,
+        backend=args.backend,
+        iterations=args.iterations,
+        minutes=args.minutes,
+        resume=args.resume,
+        terrain=args.terrain,
+        finetune=args.finetune,
+        seed=args.seed,
+        envs_per_worker=args.envs_per_worker,
+        address=args.address,
+        torch_threads=args.torch_threads,
+    )
+    row = result.last_row
+    print(
+        f"  iterations {result.iterations_done}, env steps {result.env_steps}, "
+        f"wall time {result.wall_time:.1f} s"
+    )
+    print(
+        f"  last iteration: mean reward {row.get('mean_reward', float('nan')):.3f}, "
+        f"x-velocity MSE {row.get('x_mse', float('nan')):.4f}, "
+        f"y-velocity MSE {row.get('y_mse', float('nan')):.4f}"
+    )
+    print(f"  checkpoint {result.checkpoint}; progress {result.csv_path}")
+    print(f"  TensorBoard: tensorboard --logdir {args.out}")
+    return 0
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    """Roll a trained policy out for a set of commands; print tracking errors, save a video."""
+    from chronogym.rl.evaluate import format_summary
+    from chronogym.rl.quadruped import play_quadruped
+
+    if not os.path.isfile(args.checkpoint):
+        raise SystemExit(f"checkpoint {args.checkpoint!r}: no such file")
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes={args.episodes}: expected an integer >= 1")
+    if args.steps is not None and args.steps < 1:
+        raise SystemExit(f"--steps={args.steps}: expected an integer >= 1")
+    commands = [tuple(c) for c in args.command] if args.command else None
+    rows = play_quadruped(
+        args.checkpoint,
+        commands=commands,
+        episodes=args.episodes,
+        seed=args.seed,
+        video=args.video,
+        terrain=args.terrain,
+        max_episode_steps=args.steps,
+    )
+    print(format_summary(rows))
+    if args.video:
+        print(f"video: {args.video}")
+    return 0
+
+
 def cmd_envs(args: argparse.Namespace) -> int:
     """List the registered chronogym environment ids."""
     import gymnasium as gym
@@ -196,6 +273,38 @@ def build_parser() -> argparse.ArgumentParser:
     opt.add_argument("--backend", default="ray", choices=["ray", "serial"])
     opt.add_argument("--address", default=None, help="Ray cluster address (default: local)")
     opt.set_defaults(func=cmd_optimize)
+    tr = sub.add_parser("train", help="train a policy with PPO (RSL-RL) on parallel envs")
+    tr.add_argument("problem", choices=["quadruped"])
+    tr.add_argument("--num-envs", type=int, default=16)
+    tr.add_argument("--backend", default="ray", choices=["ray", "serial"])
+    tr.add_argument("--iterations", type=int, default=None, help="PPO iterations to run")
+    tr.add_argument("--minutes", type=float, default=None, help="wall-clock budget")
+    tr.add_argument("--out", default="runs/quadruped", help="logs, CSV and checkpoints")
+    tr.add_argument("--resume", default=None, help="checkpoint to continue from")
+    tr.add_argument("--terrain", default="rigid", choices=["rigid"])
+    tr.add_argument("--finetune", action="store_true", help="conservative PPO (paper's transfer)")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--envs-per-worker", type=int, default=None)
+    tr.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (learner)")
+    tr.add_argument("--address", default=None, help="Ray cluster address (default: local)")
+    tr.set_defaults(func=cmd_train)
+    play = sub.add_parser("play", help="roll out a trained policy, print errors, save a video")
+    play.add_argument("problem", choices=["quadruped"])
+    play.add_argument("checkpoint")
+    play.add_argument("--video", default=None, help="MP4 (or .gif) to write")
+    play.add_argument("--episodes", type=int, default=1, help="episodes per command")
+    play.add_argument(
+        "--command",
+        nargs=3,
+        type=float,
+        action="append",
+        metavar=("VX", "VY", "WZ"),
+        help="a command to evaluate (repeatable; default: a standard set)",
+    )
+    play.add_argument("--steps", type=int, default=None, help="episode length in steps")
+    play.add_argument("--terrain", default="rigid", choices=["rigid"])
+    play.add_argument("--seed", type=int, default=0)
+    play.set_defaults(func=cmd_play)
     envs = sub.add_parser("envs", help="list registered environment ids")
     envs.set_defaults(func=cmd_envs)
     return parser
@@ -203,7 +312,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if getattr(args, "steps", 1) < 1:
+    steps = getattr(args, "steps", None)
+    if steps is not None and steps < 1:
         raise SystemExit(f"--steps={args.steps}: expected an integer >= 1")
     return args.func(args)
 

@@ -154,7 +154,7 @@ def test_height_posture_action_rate_and_torque_penalties():
     moved = _terms(task)
     assert moved["base_height"] < 0
     assert moved["joint_posture"] < 0
-    assert moved["action_rate"] == pytest.approx(-0.01 * 12 * task.control_dt)
+    assert moved["action_rate"] == pytest.approx(task.weights.action_rate * 12 * task.control_dt)
     assert moved["torques"] < 0
 
 
@@ -269,11 +269,26 @@ def test_pushes_kick_the_base_at_the_interval():
         ({"max_tilt": float("nan")}, "max_tilt"),
         ({"cone": "round"}, "cone"),
         ({"reset_joint_noise": 2.0}, "reset_joint_noise"),
+        ({"kp": -1.0}, r"kp=-1.0: expected None"),
     ],
 )
 def test_bad_settings_name_the_value(kwargs, message):
     with pytest.raises(ValueError, match=message):
         Go1VelocityTask(**kwargs)
+
+
+def test_servo_gains_can_be_overridden():
+    stiff, soft = _env().task, _env(kp=40.0, kd=0.5).task
+    assert stiff.model.actuator_gainprm[0, 0] == pytest.approx(100.0)
+    assert soft.model.actuator_gainprm[:, 0] == pytest.approx(np.full(12, 40.0))
+    assert soft.model.actuator_biasprm[:, 1:3] == pytest.approx(np.tile([-40.0, -0.5], (12, 1)))
+    for task in (stiff, soft):  # the same target error gives a force proportional to kp
+        task.data.qpos[7:] = DEFAULT_JOINT_POS
+        task.data.qvel[:] = 0.0
+        task.data.ctrl[:] = DEFAULT_JOINT_POS + 0.05
+        mujoco.mj_forward(task.model, task.data)
+    assert soft.data.actuator_force[0] == pytest.approx(40.0 * 0.05)
+    assert stiff.data.actuator_force[0] == pytest.approx(100.0 * 0.05)
 
 
 def test_bad_config_values_name_the_field():

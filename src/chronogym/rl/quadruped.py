@@ -14,6 +14,28 @@ TERRAINS = ("rigid",)
 BACKENDS = ("ray", "serial")
 
 
+#: PPO settings of the documented Go1 run, on top of :func:`ppo_train_config`'s legged_gym
+#: defaults. Few envs (16-64 on a laptop instead of 4096 on a GPU) make each minibatch small and
+#: noisy: longer rollouts keep the batch at ~1.5k samples, a smaller initial action noise keeps
+#: the stiff servos (kp 100) from shaking the robot, and a fixed learning rate replaces the
+#: adaptive schedule, which drove the rate to its 1e-5 floor within the first iteration
+#: (``benchmarks/README.md``, "Go1 training settings").
+QUADRUPED_PPO: dict[str, Any] = {
+    "num_steps_per_env": 48,
+    "actor": {"distribution_cfg": {"init_std": 0.5}},
+    "algorithm": {"schedule": "fixed", "learning_rate": 1e-4},
+}
+
+
+def quadruped_train_config(**overrides: Any) -> dict[str, Any]:
+    """A fresh PPO config for the Go1 task: ``QUADRUPED_PPO`` merged into the defaults, then
+    ``overrides`` (same rules as :func:`~chronogym.rl.ppo_train_config`)."""
+    from chronogym.rl.config import _merge, ppo_train_config
+
+    ppo_train_config(**overrides)  # rejects unknown keys by name
+    return _merge(ppo_train_config(**QUADRUPED_PPO), overrides)
+
+
 def env_kwargs_for(terrain: str) -> dict[str, Any]:
     """Keyword arguments of the task for a terrain name."""
     if terrain not in TERRAINS:
@@ -48,6 +70,58 @@ def make_quadruped_vec_env(
     if backend == "ray":
         kwargs.update(envs_per_worker=envs_per_worker, address=address)
     return make_vec(ENV_ID, num_envs, backend=backend, **kwargs)
+
+
+def train_quadruped(
+    out: str | Path,
+    *,
+    num_envs: int = 16,
+    backend: str = "ray",
+    iterations: int | None = None,
+    minutes: float | None = None,
+    resume: str | Path | None = None,
+    terrain: str = "rigid",
+    finetune: bool = False,
+    seed: int = 0,
+    envs_per_worker: int | None = None,
+    address: str | None = None,
+    torch_threads: int = 1,
+    train_cfg: dict[str, Any] | None = None,
+    progress: bool = True,
+) -> Any:
+    """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
+
+    ``finetune`` swaps in the paper's conservative PPO settings (``FINETUNE_PPO``), as for
+    the transfer from rigid to deformable terrain. Returns :class:`~chronogym.rl.TrainResult`.
+    """
+    from chronogym.rl.config import FINETUNE_PPO
+    from chronogym.rl.trainer import _check_budget, train
+    from chronogym.rl.vecenv import RslRlVecEnv
+
+    _check_budget(iterations, minutes)
+    if resume is not None and not Path(resume).is_file():
+        raise FileNotFoundError(f"resume={str(resume)!r}: no such checkpoint file")
+    cfg = train_cfg if train_cfg is not None else quadruped_train_config()
+    if finetune:
+        cfg = {**cfg, "algorithm": {**cfg["algorithm"], **FINETUNE_PPO}}
+    vec = make_quadruped_vec_env(
+        num_envs, backend, terrain=terrain, envs_per_worker=envs_per_worker, address=address
+    )
+    env = RslRlVecEnv(vec, seed=seed)
+    try:
+        return train(
+            env,
+            out,
+            iterations=iterations,
+            minutes=minutes,
+            resume=resume,
+            train_cfg=cfg,
+            torch_threads=torch_threads,
+            progress=progress,
+            seed=seed,
+        )
+    finally:
+        env.close()
 
 
 def play_quadruped(

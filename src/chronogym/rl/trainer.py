@@ -23,7 +23,16 @@ from typing import Any
 
 import numpy as np
 
-CSV_HEADER = ("wall_time", "iteration", "env_steps", "mean_reward", "x_mse", "y_mse")
+CSV_HEADER = (
+    "wall_time",
+    "iteration",
+    "env_steps",
+    "mean_reward",
+    "x_mse",
+    "y_mse",
+    "collect_s",
+    "learn_s",
+)
 X_KEY = "/metrics/x_vel_mse"
 Y_KEY = "/metrics/y_vel_mse"
 
@@ -260,6 +269,8 @@ def train(
                     ),
                     "x_mse": _mean(x_errors),
                     "y_mse": _mean(y_errors),
+                    "collect_s": collect_end - it_start,
+                    "learn_s": learn_end - collect_end,
                 }
                 writer.writerow([row[key] for key in CSV_HEADER])
                 handle.flush()

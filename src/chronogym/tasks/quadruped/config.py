@@ -63,13 +63,13 @@ class RewardWeights:
 
     tracking_lin_vel: float = 1.0  # exp(-|v_xy - cmd_xy|^2 / sigma)
     tracking_ang_vel: float = 0.5  # exp(-(w_z - cmd_wz)^2 / sigma)
-    lin_vel_z: float = -2.0  # v_z^2
-    ang_vel_xy: float = -0.05  # w_x^2 + w_y^2 (roll and pitch rate)
+    lin_vel_z: float = -1.0  # v_z^2
+    ang_vel_xy: float = -0.02  # w_x^2 + w_y^2 (roll and pitch rate)
     orientation: float = -1.0  # |projected gravity_xy|^2
     base_height: float = -10.0  # (h - target)^2
-    action_rate: float = -0.01  # |a - a_prev|^2
+    action_rate: float = -0.005  # |a - a_prev|^2
     joint_posture: float = -0.05  # |q - q_default|^2
-    torques: float = -2e-4  # |tau|^2
+    torques: float = -1e-4  # |tau|^2
     feet_air_time: float = 1.0  # sum over touchdowns of (air time - threshold), if moving
 
     def __post_init__(self) -> None:

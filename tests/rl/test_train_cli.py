@@ -1,0 +1,85 @@
+"""`chronogym train quadruped` and `chronogym play quadruped`, end to end at tiny size."""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip("rsl_rl")
+
+CLI = [sys.executable, "-m", "chronogym.cli"]
+
+
+def run_cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    env = {**os.environ, "RAY_ADDRESS": ""}
+    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def iterations(out) -> list[int]:
+    with open(out / "progress.csv", newline="") as handle:
+        return [int(row["iteration"]) for row in csv.DictReader(handle)]
+
+
+def test_train_resume_and_play_on_the_serial_backend(tmp_path):
+    out = tmp_path / "run"
+    first = run_cli(
+        "train", "quadruped", "--num-envs", "2", "--backend", "serial",
+        "--iterations", "2", "--out", str(out),
+    )  # fmt: skip
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "iterations 2, env steps" in first.stdout
+    assert iterations(out) == [0, 1]
+    assert (out / "latest.pt").is_file() and (out / "model_1.pt").is_file()
+
+    resumed = run_cli(
+        "train", "quadruped", "--num-envs", "2", "--backend", "serial", "--iterations", "1",
+        "--out", str(out), "--resume", str(out / "latest.pt"), "--finetune",
+    )  # fmt: skip
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert iterations(out) == [0, 1, 2]  # the count carries on, rows are appended
+    assert (out / "model_2.pt").is_file()
+
+    played = run_cli(
+        "play", "quadruped", str(out / "latest.pt"), "--steps", "15",
+        "--command", "0.5", "0", "0", "--command", "0", "0.2", "0",
+    )  # fmt: skip
+    assert played.returncode == 0, played.stderr[-3000:]
+    lines = played.stdout.strip().splitlines()
+    assert "x_mse" in lines[0]
+    assert lines[1].split()[0:3] == ["(+0.50,", "+0.00,", "+0.00)"]
+    assert lines[2].split()[0:3] == ["(+0.00,", "+0.20,", "+0.00)"]
+
+
+def test_train_on_ray_workers(tmp_path):
+    result = run_cli(
+        "train", "quadruped", "--num-envs", "2", "--backend", "ray", "--iterations", "2",
+        "--out", str(tmp_path),
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert iterations(tmp_path) == [0, 1]
+    assert "on the ray backend" in result.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--iterations", "0"], "--iterations=0: expected an integer >= 1"),
+        ([], "give --iterations I, --minutes M, or both"),
+        (["--minutes", "1", "--num-envs", "0"], "--num-envs=0: expected an integer >= 1"),
+        (["--minutes", "1", "--resume", "missing.pt"], "--resume=missing.pt: no such checkpoint"),
+    ],
+)
+def test_train_rejects_bad_input(args, message, tmp_path):
+    result = run_cli("train", "quadruped", "--out", str(tmp_path), *args, timeout=60)
+    assert result.returncode != 0
+    assert message in result.stderr
+
+
+def test_play_rejects_a_missing_checkpoint(tmp_path):
+    result = run_cli("play", "quadruped", str(tmp_path / "nope.pt"), timeout=60)
+    assert result.returncode != 0
+    assert "no such file" in result.stderr
