@@ -160,9 +160,8 @@ def main() -> None:
         )
     env = SimEnv(Go1VelocityTask(max_episode_steps=None))
     task = env.task
-    chosen = next(
-        row for row in rows if (row.cone, row.dt, row.impratio) == (task.cone, task.dt, task.impratio)
-    )
+    setting = (task.cone, task.dt, task.impratio)
+    chosen = next(row for row in rows if (row.cone, row.dt, row.impratio) == setting)
     task_us, raw_us = task_cost(env, targets, args.repeats)
     chosen.task_us = task_us
     chosen.task_over_raw = task_us / raw_us
