@@ -40,17 +40,12 @@ def parse_config(name: str) -> tuple[str, int]:
 
 
 def run_config(name: str, minutes: float, out: Path, seed: int) -> dict:
-    from chronogym.rl.quadruped import make_quadruped_vec_env
-    from chronogym.rl.trainer import train
-    from chronogym.rl.vecenv import RslRlVecEnv
+    from chronogym.rl.quadruped import train_quadruped
 
     backend, num_envs = parse_config(name)
-    vec = make_quadruped_vec_env(num_envs, backend)
-    adapter = RslRlVecEnv(vec, seed=seed)
-    try:
-        result = train(adapter, out / name, minutes=minutes, seed=seed, progress=True)
-    finally:
-        adapter.close()
+    result = train_quadruped(
+        out / name, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed
+    )
     rows = read_rows(Path(result.csv_path))
     return {
         "config": name,

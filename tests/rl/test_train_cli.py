@@ -54,6 +54,41 @@ def test_train_resume_and_play_on_the_serial_backend(tmp_path):
     assert lines[2].split()[0:3] == ["(+0.00,", "+0.20,", "+0.00)"]
 
 
+def can_render() -> bool:
+    from chronogym.rl.quadruped import check_can_render
+
+    try:
+        check_can_render()
+    except RuntimeError:
+        return False
+    return True
+
+
+def test_play_writes_a_video(tmp_path):
+    if not can_render():
+        pytest.skip("no OpenGL backend for offscreen rendering (README: Rendering)")
+    out = tmp_path / "run"
+    trained = run_cli(
+        "train", "quadruped", "--num-envs", "1", "--backend", "serial", "--iterations", "1",
+        "--out", str(out),
+    )  # fmt: skip
+    assert trained.returncode == 0, trained.stderr[-3000:]
+    for name in ("rollout.mp4", "rollout.gif"):
+        video = tmp_path / name
+        played = run_cli(
+            "play", "quadruped", str(out / "latest.pt"), "--steps", "6", "--command", "0.5", "0",
+            "0", "--video", str(video),
+        )  # fmt: skip
+        assert played.returncode == 0, played.stderr[-3000:]
+        assert f"video: {video}" in played.stdout
+        assert video.stat().st_size > 1000
+    import imageio.v2 as imageio
+
+    frames = imageio.mimread(tmp_path / "rollout.gif")
+    assert len(frames) == 4  # 7 frames (reset + 6 steps), every second one in a GIF
+    assert frames[0].shape[2] in (3, 4) and frames[0].std() > 1  # an image, not a blank
+
+
 def test_train_on_ray_workers(tmp_path):
     result = run_cli(
         "train", "quadruped", "--num-envs", "2", "--backend", "ray", "--iterations", "2",

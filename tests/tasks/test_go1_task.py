@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-import chronogym  # noqa: F401  (registers the ids)
+import chronogym
 from chronogym.env import SimEnv
 from chronogym.tasks.quadruped import (
     DEFAULT_JOINT_POS,
@@ -298,3 +298,38 @@ def test_bad_config_values_name_the_field():
         RewardWeights(torques=float("inf"))
     with pytest.raises(ValueError, match="friction"):
         DomainRandomization(friction=(0.0, 1.0))
+
+
+def test_same_seed_same_trajectory_on_ray_and_in_gymnasium(ray_cluster):
+    """Go1 with every randomization on: RayVectorEnv (2 workers) == Gymnasium's SyncVectorEnv."""
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import data_equivalence
+
+
+    kwargs = {
+        "randomization": DomainRandomization(push_interval_s=0.1),
+        "max_episode_steps": 12,
+    }
+    same_step = gym.vector.AutoresetMode.SAME_STEP
+    ray_vec = chronogym.make_vec(
+        "chronogym/Go1Velocity-v0", 3, backend="ray", envs_per_worker=2,
+        autoreset_mode=same_step, env_kwargs=kwargs,
+    )  # fmt: skip
+    sync_vec = gym.make_vec(
+        "chronogym/Go1Velocity-v0", 3, vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": same_step}, **kwargs,
+    )  # fmt: skip
+    try:
+        results = []
+        for vec in (ray_vec, sync_vec):
+            obs, _ = vec.reset(seed=5)
+            steps = [obs]
+            for actions in np.random.default_rng(1).normal(0, 1, (30, 3, 12)).astype(np.float32):
+                obs, reward, terminated, truncated, infos = vec.step(actions)
+                steps.append((obs, reward, terminated, truncated, infos.get("final_obs")))
+            results.append(steps)
+        assert data_equivalence(results[0], results[1], exact=True)
+        assert any(step[3].any() for step in results[0][1:])  # episodes ended and restarted
+    finally:
+        ray_vec.close()
+        sync_vec.close()

@@ -84,19 +84,31 @@ def _mean(values: list[float]) -> float:
 
 
 class _Progress:
-    """tqdm bar when available, else one short line every ``every`` iterations."""
+    """A tqdm bar over iterations (or, with only a time budget, over its seconds); without
+    tqdm, one short line every ``every`` iterations."""
 
-    def __init__(self, enabled: bool, total: int | None, log: Callable[[str], Any]) -> None:
+    def __init__(
+        self,
+        enabled: bool,
+        iterations: int | None,
+        budget_s: float,
+        log: Callable[[str], Any],
+    ) -> None:
         self.bar = None
         self.log = log if enabled else None
-        self.every = max(1, (total or 100) // 20)
+        self.every = max(1, (iterations or 100) // 20)
         self.count = 0
+        self.by_time = iterations is None
+        self.shown_s = 0
         if enabled:
             try:
                 from tqdm import tqdm
             except ImportError:
                 return
-            self.bar = tqdm(total=total, desc="train", unit="it")
+            if self.by_time:
+                self.bar = tqdm(total=round(budget_s), desc="train", unit="s")
+            else:
+                self.bar = tqdm(total=iterations, desc="train", unit="it")
             self.log = None
 
     def update(self, row: dict[str, float]) -> None:
@@ -104,8 +116,13 @@ class _Progress:
         text = f"it {int(row['iteration'])} steps {int(row['env_steps'])} "
         text += f"reward {row['mean_reward']:.2f}"
         if self.bar is not None:
-            self.bar.set_postfix_str(f"reward {row['mean_reward']:.2f}", refresh=False)
-            self.bar.update(1)
+            self.bar.set_postfix_str(text, refresh=False)
+            if self.by_time:
+                seconds = min(int(row["wall_time"]), self.bar.total)
+                self.bar.update(seconds - self.shown_s)
+                self.shown_s = seconds
+            else:
+                self.bar.update(1)
         elif self.log is not None and self.count % self.every == 0:
             self.log(text)
 
@@ -210,7 +227,7 @@ def train(
         shutil.copyfile(path, out / "latest.pt")
         return path
 
-    bar = _Progress(progress, iterations, log)
+    bar = _Progress(progress, iterations, budget_s, log)
     t0 = time.perf_counter()
     row: dict[str, float] = {}
     checkpoint: Path | None = None

@@ -29,6 +29,11 @@ class RslRlVecEnv(VecEnv):
     on steps where episodes ended, ``"log"``: each key of the tasks' ``info["log"]``
     mapped to a 1-D float tensor of the values of the envs that reported it.
 
+    ``episode_length_buf`` counts each env's steps in its current episode and is set to 0
+    when the episode ends. It is writable, as RSL-RL's ``VecEnv`` requires, but the count is
+    the adapter's: writing it (``OnPolicyRunner.learn(init_at_random_ep_len=True)``) does not
+    move the envs' own time limits, so episodes are not desynchronized that way.
+
     Args:
         vec_env: the vector env; the adapter resets it (with ``seed``) and closes it on
             :meth:`close`.
