@@ -213,7 +213,7 @@ def test_base_on_the_ground_terminates():
 
 
 def test_standing_still_survives_and_reports_episode_means_at_the_time_limit():
-    env = SimEnv(Go1VelocityTask(max_episode_steps=25))
+    env = SimEnv(Go1VelocityTask(max_episode_steps=25, reset_joint_noise=0.0))
     env.reset(seed=1, options={"command": (0.0, 0.0, 0.0)})
     for step in range(25):
         _, reward, terminated, truncated, info = env.step(np.zeros(12, dtype=np.float32))
@@ -223,7 +223,8 @@ def test_standing_still_survives_and_reports_episode_means_at_the_time_limit():
     assert truncated
     log = info["log"]
     assert log["/metrics/survived"] == 1.0
-    assert log["/metrics/x_vel_mse"] < 0.01 and log["/metrics/y_vel_mse"] < 0.01
+    # the soft servos (kp 35) let the base sag ~3 cm while it settles: a small drift, no walk
+    assert log["/metrics/x_vel_mse"] < 0.05 and log["/metrics/y_vel_mse"] < 0.05
     assert log["/reward/tracking_lin_vel"] > 0.9 * 25 * 0.02
     assert {f"/reward/{name}" for name in RewardWeights().active()} <= set(log)
 
@@ -278,7 +279,7 @@ def test_bad_settings_name_the_value(kwargs, message):
 
 
 def test_servo_gains_can_be_overridden():
-    stiff, soft = _env().task, _env(kp=40.0, kd=0.5).task
+    stiff, soft = _env(kp=None, kd=None).task, _env(kp=40.0, kd=0.5).task
     assert stiff.model.actuator_gainprm[0, 0] == pytest.approx(100.0)
     assert soft.model.actuator_gainprm[:, 0] == pytest.approx(np.full(12, 40.0))
     assert soft.model.actuator_biasprm[:, 1:3] == pytest.approx(np.tile([-40.0, -0.5], (12, 1)))

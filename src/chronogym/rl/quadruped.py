@@ -17,11 +17,12 @@ BACKENDS = ("ray", "serial")
 #: PPO settings of the documented Go1 run, on top of :func:`ppo_train_config`'s legged_gym
 #: defaults. Few envs (16-64 on a laptop instead of 4096 on a GPU) make each minibatch small and
 #: noisy: longer rollouts keep the batch at ~1.5k samples, a smaller initial action noise keeps
-#: the stiff servos (kp 100) from shaking the robot, and a fixed learning rate replaces the
+#: the servos from shaking the robot, and a fixed learning rate replaces the
 #: adaptive schedule, which drove the rate to its 1e-5 floor within the first iteration
-#: (``benchmarks/README.md``, "Go1 training settings").
+#: (``benchmarks/README.md``, "Go1 training").
 QUADRUPED_PPO: dict[str, Any] = {
     "num_steps_per_env": 48,
+    "save_interval": 200,
     "actor": {"distribution_cfg": {"init_std": 0.5}},
     "algorithm": {"schedule": "fixed", "learning_rate": 1e-4},
 }

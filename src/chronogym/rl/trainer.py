@@ -350,7 +350,7 @@ def load_policy(
 
     if torch_threads is not None:
         torch.set_num_threads(torch_threads)
-    saved = torch.load(str(checkpoint), map_location="cpu", weights_only=False)
+    saved = torch.load(str(checkpoint), map_location="cpu", weights_only=True)  # no unpickling
     infos = saved.get("infos") or {}
     cfg = train_cfg or infos.get("train_cfg") or ppo_train_config()
     state = saved["actor_state_dict"]

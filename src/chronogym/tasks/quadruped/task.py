@@ -5,7 +5,10 @@ base angular velocity (body frame, 3), projected gravity (body frame, 3), comman
 yaw rate, 3), joint position offsets from the default pose (12), joint velocities (12),
 previous action (12).
 Action (float32, 12): normalized joint targets; target = default pose + ``action_scale`` x a,
-sent to the model's position servos (kp 100, kv 2, torque-limited; ``kp`` / ``kd`` override).
+sent to the model's position servos, torque-limited, with the task's gains ``kp`` = 35 N m/rad
+and ``kd`` = 0.5 N m s/rad (``None`` keeps the model's kp 100, kv 2). With the stiff servos the
+50 Hz exploration noise shakes the robot forward like a bristlebot: the stochastic policy tracked
+the command in training while its mean stood still (benchmarks/README.md, "Go1 training").
 Reward: named, weighted terms (``RewardWeights``) times the control interval, clipped at 0
 from below (``only_positive_rewards``, as in legged_gym: with random actions the penalties
 outweigh tracking, and PPO would learn to fall on purpose); the terms of
@@ -90,8 +93,8 @@ class Go1VelocityTask(MujocoTask):
         cone: str = "elliptic",
         impratio: float = 100.0,
         only_positive_rewards: bool = True,
-        kp: float | None = None,
-        kd: float | None = None,
+        kp: float | None = 35.0,
+        kd: float | None = 0.5,
     ) -> None:
         for name, value in (
             ("action_scale", action_scale),
