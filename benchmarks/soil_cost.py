@@ -1,0 +1,166 @@
+"""Cost of SCM soil (``chronogym.terrain.MujocoSoil``) against rigid ground for the Go1.
+
+The same seeded smooth random joint targets as ``quadruped_physics.py`` (walking-like contact
+changes) drive the Go1 at the task's physics settings (elliptic cone, impratio 100, dt 5 ms,
+4 physics steps per 20 ms policy step) for the same number of physics steps on:
+
+* ``rigid``: the floor plane, ``mj_step(model, data, 4)`` per policy step;
+* ``<preset>/feet``: soil under the four foot spheres; the floor keeps touching the rest;
+* ``<preset>/legs``: soil under the four calf bodies (calf capsule + foot sphere).
+
+Soil rows step ``soil.Advance(dt)`` + ``mj_step`` once per physics step (the advanceables
+``[soil, (model, data)]``), with the floor excluded from the soil's geoms. Columns: one-core
+µs per physics step (best of ``--repeats``), ratio to rigid, mean base height, deepest sinkage,
+falls (base below 0.12 m: the robot and the soil are reset) and MuJoCo contacts (mean over the
+policy steps; on soil the floor only touches geoms the soil does not hold).
+
+    python benchmarks/soil_cost.py [--out benchmarks/results/soil_cost.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from quadruped_physics import action_sequence  # same seeded targets (this script's folder)
+
+import chronogym  # noqa: F401  (sets the GL backend before mujoco rendering is touched)
+from chronogym.tasks.quadruped import FOOT_GEOM_NAMES, LEG_NAMES, load_go1
+from chronogym.terrain import MujocoSoil
+
+DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "soil_cost.json"
+DT, SUBSTEPS = 0.005, 4
+EXTENT, RESOLUTION = (8.0, 8.0), 0.01
+SETTINGS = [  # (name, preset or None for rigid, soil geoms)
+    ("rigid", None, None),
+    ("firm/feet", "firm", "feet"),
+    ("soft/feet", "soft", "feet"),
+    ("firm/legs", "firm", "legs"),
+    ("soft/legs", "soft", "legs"),
+]
+
+
+@dataclass
+class Row:
+    setting: str
+    us_per_step: float
+    ratio: float
+    base_height: float
+    max_sinkage_mm: float
+    falls: int
+    contacts_per_step: float
+
+
+def build(preset: str | None, holds: str | None):
+    model, data = load_go1()
+    model.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    model.opt.impratio = 100.0
+    model.opt.timestep = DT
+    if preset is None:
+        return model, data, None
+    where = (
+        {"geoms": FOOT_GEOM_NAMES}
+        if holds == "feet"
+        else {"bodies": [f"{leg}_calf" for leg in LEG_NAMES]}
+    )
+    soil = MujocoSoil(model, data, preset, extent=EXTENT, resolution=RESOLUTION, **where)
+    soil.exclude_ground("floor")
+    return model, data, soil
+
+
+def home(model, data, soil) -> None:
+    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+    if soil is not None:
+        soil.reset()
+    mujoco.mj_forward(model, data)
+
+
+def run(model, data, soil, targets: np.ndarray) -> tuple[float, dict]:
+    """Seconds for the whole sequence, and what the robot did."""
+    home(model, data, soil)
+    heights, falls, contacts, sinkage = [], 0, 0, 0.0
+    step = mujoco.mj_step
+    start = time.perf_counter()
+    for target in targets:
+        data.ctrl[:] = target
+        if soil is None:
+            step(model, data, SUBSTEPS)
+        else:
+            for _ in range(SUBSTEPS):
+                soil.Advance(DT)
+                step(model, data)
+        contacts += data.ncon
+        heights.append(data.qpos[2])
+        if data.qpos[2] < 0.12:  # fell: stand up again so the load stays walking-like
+            falls += 1
+            if soil is not None:
+                sinkage = max(sinkage, float(soil.sinkage.max()))
+            home(model, data, soil)
+    elapsed = time.perf_counter() - start
+    if soil is not None:
+        sinkage = max(sinkage, float(soil.sinkage.max()))
+    stats = {
+        "base_height": float(np.mean(heights)),
+        "max_sinkage_mm": 1000 * sinkage,
+        "falls": falls,
+        "contacts_per_step": contacts / len(targets),
+    }
+    return elapsed, stats
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--steps", type=int, default=500, help="policy steps (x4 physics steps)")
+    args = parser.parse_args()
+    targets = action_sequence(args.steps)
+    physics_steps = args.steps * SUBSTEPS
+    rows: list[Row] = []
+    rigid_us = math.nan
+    for name, preset, holds in SETTINGS:
+        model, data, soil = build(preset, holds)
+        best, stats = math.inf, {}
+        for _ in range(args.repeats):
+            elapsed, stats = run(model, data, soil, targets)
+            best = min(best, elapsed)
+        us = best / physics_steps * 1e6
+        if preset is None:
+            rigid_us = us
+        rows.append(Row(name, us, us / rigid_us, **stats))
+    print(f"{'setting':>10} {'us/step':>8} {'ratio':>6} {'base_h':>7} {'sink_mm':>8} ", end="")
+    print(f"{'falls':>5} {'ncon':>5}")
+    for row in rows:
+        print(
+            f"{row.setting:>10} {row.us_per_step:8.1f} {row.ratio:6.2f} {row.base_height:7.3f} "
+            f"{row.max_sinkage_mm:8.1f} {row.falls:5d} {row.contacts_per_step:5.2f}"
+        )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    result = {
+        "benchmark": "soil_cost",
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+        "mujoco": mujoco.__version__,
+        "numpy": np.__version__,
+        "dt": DT,
+        "substeps": SUBSTEPS,
+        "physics_steps": physics_steps,
+        "resolution": RESOLUTION,
+        "extent": EXTENT,
+        "rows": [asdict(row) for row in rows],
+    }
+    args.out.write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
