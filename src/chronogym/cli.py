@@ -291,7 +291,9 @@ def build_parser() -> argparse.ArgumentParser:
     play = sub.add_parser("play", help="roll out a trained policy, print errors, save a video")
     play.add_argument("problem", choices=["quadruped"])
     play.add_argument("checkpoint")
-    play.add_argument("--video", default=None, help="MP4 (or .gif) to write")
+    play.add_argument(
+        "--video", default=None, help="MP4 to write (.gif: an animation, .png: a film strip)"
+    )
     play.add_argument("--episodes", type=int, default=1, help="episodes per command")
     play.add_argument(
         "--command",

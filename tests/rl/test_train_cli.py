@@ -73,7 +73,7 @@ def test_play_writes_a_video(tmp_path):
         "--out", str(out),
     )  # fmt: skip
     assert trained.returncode == 0, trained.stderr[-3000:]
-    for name in ("rollout.mp4", "rollout.gif"):
+    for name in ("rollout.mp4", "rollout.gif", "rollout.png"):
         video = tmp_path / name
         played = run_cli(
             "play", "quadruped", str(out / "latest.pt"), "--steps", "6", "--command", "0.5", "0",
@@ -87,6 +87,9 @@ def test_play_writes_a_video(tmp_path):
     frames = imageio.mimread(tmp_path / "rollout.gif")
     assert len(frames) == 4  # 7 frames (reset + 6 steps), every second one in a GIF
     assert frames[0].shape[2] in (3, 4) and frames[0].std() > 1  # an image, not a blank
+    strip = imageio.imread(tmp_path / "rollout.png")
+    height, width = frames[0].shape[:2]
+    assert strip.shape[:2] == (height, 7 * width)  # all 7 frames side by side
 
 
 def test_train_on_ray_workers(tmp_path):

@@ -107,9 +107,16 @@ def evaluate(
 
 
 def write_video(path: str | Path, frames: Sequence[np.ndarray], fps: float) -> Path:
-    """Write RGB frames as MP4 (imageio + imageio-ffmpeg) or, for a ``.gif`` path, a GIF."""
+    """Write RGB frames as MP4 (imageio + imageio-ffmpeg), a GIF (``.gif``) or, for a ``.png``
+    path, a film strip of 8 evenly spaced frames side by side (a still for docs and reviews)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix.lower() == ".png":
+        from PIL import Image
+
+        picks = np.linspace(0, len(frames) - 1, num=min(8, len(frames))).round().astype(int)
+        Image.fromarray(np.concatenate([frames[i] for i in picks], axis=1)).save(path)
+        return path
     if path.suffix.lower() == ".gif":
         from PIL import Image
 

@@ -83,6 +83,9 @@ def _mean(values: list[float]) -> float:
     return float(np.mean(values)) if values else math.nan
 
 
+_TIME_BAR = "{l_bar}{bar}| {n_fmt}/{total_fmt} s [{elapsed}<{remaining}{postfix}]"
+
+
 class _Progress:
     """A tqdm bar over iterations (or, with only a time budget, over its seconds); without
     tqdm, one short line every ``every`` iterations."""
@@ -106,7 +109,11 @@ class _Progress:
             except ImportError:
                 return
             if self.by_time:
-                self.bar = tqdm(total=round(budget_s), desc="train", unit="s")
+                self.bar = tqdm(
+                    total=round(budget_s),
+                    desc="train",
+                    bar_format=_TIME_BAR,
+                )
             else:
                 self.bar = tqdm(total=iterations, desc="train", unit="it")
             self.log = None
