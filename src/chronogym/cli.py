@@ -219,6 +219,10 @@ def cmd_play(args: argparse.Namespace) -> int:
         raise SystemExit(f"--episodes={args.episodes}: expected an integer >= 1")
     if args.steps is not None and args.steps < 1:
         raise SystemExit(f"--steps={args.steps}: expected an integer >= 1")
+    if not args.video_seconds > 0:
+        raise SystemExit(f"--video-seconds={args.video_seconds}: expected a number > 0")
+    if args.video and os.path.splitext(args.video)[1].lower() not in (".mp4", ".gif", ".png"):
+        raise SystemExit(f"--video={args.video}: expected a .mp4, .gif or .png path")
     commands = [tuple(c) for c in args.command] if args.command else None
     rows = play_quadruped(
         args.checkpoint,
@@ -228,6 +232,7 @@ def cmd_play(args: argparse.Namespace) -> int:
         video=args.video,
         terrain=args.terrain,
         max_episode_steps=args.steps,
+        video_seconds=args.video_seconds,
     )
     print(format_summary(rows))
     if args.video:
@@ -293,6 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument("checkpoint")
     play.add_argument(
         "--video", default=None, help="MP4 to write (.gif: an animation, .png: a film strip)"
+    )
+    play.add_argument(
+        "--video-seconds", type=float, default=5.0, help="seconds recorded per command"
     )
     play.add_argument("--episodes", type=int, default=1, help="episodes per command")
     play.add_argument(

@@ -85,11 +85,11 @@ def test_play_writes_a_video(tmp_path):
     import imageio.v2 as imageio
 
     frames = imageio.mimread(tmp_path / "rollout.gif")
-    assert len(frames) == 4  # 7 frames (reset + 6 steps), every second one in a GIF
+    assert len(frames) == 4  # steps 0, 2, 4, 6: 25 frames/s of the 50 Hz control
     assert frames[0].shape[2] in (3, 4) and frames[0].std() > 1  # an image, not a blank
     strip = imageio.imread(tmp_path / "rollout.png")
     height, width = frames[0].shape[:2]
-    assert strip.shape[:2] == (height, 7 * width)  # all 7 frames side by side
+    assert strip.shape[:2] == (height, 4 * width)  # the 4 frames side by side
 
 
 def test_train_on_ray_workers(tmp_path):
@@ -121,3 +121,11 @@ def test_play_rejects_a_missing_checkpoint(tmp_path):
     result = run_cli("play", "quadruped", str(tmp_path / "nope.pt"), timeout=60)
     assert result.returncode != 0
     assert "no such file" in result.stderr
+
+
+def test_play_rejects_a_video_format_it_cannot_write(tmp_path):
+    checkpoint = tmp_path / "any.pt"
+    checkpoint.write_bytes(b"")
+    result = run_cli("play", "quadruped", str(checkpoint), "--video", "out.avi", timeout=60)
+    assert result.returncode != 0
+    assert "--video=out.avi: expected a .mp4, .gif or .png path" in result.stderr

@@ -43,24 +43,28 @@ def run_episode(
     policy: Policy,
     command: Sequence[float],
     seed: int,
-    frames: list[np.ndarray] | None = None,
+    recorder: VideoRecorder | None = None,
+    record_steps: int = 0,
 ) -> EpisodeResult:
-    """Run one full episode of ``env`` (a SimEnv of a Go1VelocityTask) with a fixed command."""
+    """Run one full episode of ``env`` (a SimEnv of a Go1VelocityTask) with a fixed command;
+    with ``recorder``, render its first ``record_steps`` steps into it."""
     obs, _ = env.reset(seed=seed, options={"command": tuple(command)})
     task = env.unwrapped.task
     total = 0.0
     vx: list[float] = []
     vy: list[float] = []
-    if frames is not None:
-        frames.append(env.render())
+    step = 0
+    if recorder is not None:
+        recorder.add(env.render, step)
     while True:
         action = np.asarray(policy(obs), dtype=np.float32)
         obs, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
         vx.append(float(task.base_lin_vel[0]))
         vy.append(float(task.base_lin_vel[1]))
-        if frames is not None:
-            frames.append(env.render())
+        step += 1
+        if recorder is not None and step <= record_steps:
+            recorder.add(env.render, step)
         if terminated or truncated:
             break
     log = info.get("log", {})
@@ -85,11 +89,17 @@ def evaluate(
     seed: int = 0,
     video: str | Path | None = None,
     progress: bool = True,
+    video_seconds: float = 5.0,
 ) -> list[EpisodeResult]:
-    """Run ``episodes`` episodes per command; with ``video``, record the first of each."""
+    """Run ``episodes`` episodes per command; with ``video``, record the first
+    ``video_seconds`` of the first episode of each command (see :class:`VideoRecorder`)."""
     if episodes < 1:
         raise ValueError(f"episodes={episodes!r}: expected an integer >= 1")
-    frames: list[np.ndarray] | None = [] if video is not None else None
+    if not video_seconds > 0:
+        raise ValueError(f"video_seconds={video_seconds!r}: expected a number > 0")
+    fps = float(env.unwrapped.metadata.get("render_fps", 50))
+    recorder = VideoRecorder(video, fps) if video is not None else None
+    record_steps = math.ceil(video_seconds * fps)
     results = []
     runs = [(command, seed + i) for command in commands for i in range(episodes)]
     iterator: Any = runs
@@ -97,45 +107,82 @@ def evaluate(
         from tqdm import tqdm
 
         iterator = tqdm(runs, desc="episodes", unit="ep")
-    for command, episode_seed in iterator:
-        record = frames if (frames is not None and episode_seed == seed) else None
-        results.append(run_episode(env, policy, command, episode_seed, record))
-    if video is not None and frames:
-        fps = env.unwrapped.metadata.get("render_fps", 50)
-        write_video(video, frames, fps)
+    try:
+        for command, episode_seed in iterator:
+            record = recorder if episode_seed == seed else None
+            results.append(run_episode(env, policy, command, episode_seed, record, record_steps))
+    finally:
+        if recorder is not None:
+            recorder.close()
     return results
 
 
-def write_video(path: str | Path, frames: Sequence[np.ndarray], fps: float) -> Path:
-    """Write RGB frames as MP4 (imageio + imageio-ffmpeg), a GIF (``.gif``) or, for a ``.png``
-    path, a film strip of 8 evenly spaced frames side by side (a still for docs and reviews)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix.lower() == ".png":
+class VideoRecorder:
+    """Rendered frames to a file, at most 25 frames per second of simulated time.
+
+    ``.mp4`` (imageio-ffmpeg) is written as frames arrive; ``.gif`` keeps every recorded
+    frame until :meth:`close`; ``.png`` is a film strip of 8 evenly spaced frames side by side
+    (a still for docs and reviews), chosen from at most 64 kept frames, so memory stays bounded.
+    """
+
+    max_fps = 25.0
+    strip_frames = 8
+    strip_pool = 64
+
+    def __init__(self, path: str | Path, fps: float) -> None:
+        self.path = Path(path)
+        self.kind = self.path.suffix.lower()
+        if self.kind not in (".mp4", ".gif", ".png"):
+            raise ValueError(f"video={str(path)!r}: expected a .mp4, .gif or .png path")
+        self.stride = max(1, round(fps / self.max_fps))  # simulation steps per frame
+        self.fps = fps / self.stride
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.kept: list[np.ndarray] = []
+        self.keep_every = 1  # of recorded frames (the film strip thins its pool)
+        self.recorded = 0
+        self.writer = None
+        if self.kind == ".mp4":
+            try:
+                import imageio.v2 as imageio
+            except ImportError as error:
+                raise RuntimeError(
+                    f"writing {self.path} needs imageio and imageio-ffmpeg "
+                    "(pip install 'chronogym[rl]'), or give a .gif or .png path"
+                ) from error
+            self.writer = imageio.get_writer(self.path, fps=self.fps, macro_block_size=8)
+
+    def add(self, render: Callable[[], np.ndarray], step: int) -> None:
+        """Render and keep the frame of simulation ``step`` if it falls on the frame stride."""
+        if step % self.stride:
+            return
+        index, self.recorded = self.recorded, self.recorded + 1
+        if self.writer is not None:
+            self.writer.append_data(render())
+        elif index % self.keep_every == 0:
+            self.kept.append(render())
+            if self.kind == ".png" and len(self.kept) > self.strip_pool:
+                self.kept = self.kept[::2]
+                self.keep_every *= 2
+
+    def close(self) -> Path:
+        """Finish the file; return its path."""
         from PIL import Image
 
-        picks = np.linspace(0, len(frames) - 1, num=min(8, len(frames))).round().astype(int)
-        Image.fromarray(np.concatenate([frames[i] for i in picks], axis=1)).save(path)
-        return path
-    if path.suffix.lower() == ".gif":
-        from PIL import Image
-
-        images = [Image.fromarray(frame) for frame in frames[::2]]  # 25 fps is plenty for a GIF
-        images[0].save(
-            path, save_all=True, append_images=images[1:], duration=int(2000 / fps), loop=0
-        )
-        return path
-    try:
-        import imageio.v2 as imageio
-    except ImportError as error:
-        raise RuntimeError(
-            f"writing {path} needs imageio and imageio-ffmpeg "
-            "(pip install 'chronogym[rl]'), or give a .gif path"
-        ) from error
-    with imageio.get_writer(path, fps=fps, macro_block_size=8) as writer:
-        for frame in frames:
-            writer.append_data(frame)
-    return path
+        if self.writer is not None:
+            self.writer.close()
+        elif self.kept and self.kind == ".png":
+            count = min(self.strip_frames, len(self.kept))
+            picks = np.linspace(0, len(self.kept) - 1, num=count).round().astype(int)
+            strip = np.concatenate([self.kept[i] for i in picks], axis=1)
+            Image.fromarray(strip).save(self.path)
+        elif self.kept:
+            images = [Image.fromarray(frame) for frame in self.kept]
+            duration = round(1000 / self.fps)
+            images[0].save(
+                self.path, save_all=True, append_images=images[1:], duration=duration, loop=0
+            )
+        self.kept = []
+        return self.path
 
 
 def summarize(results: Sequence[EpisodeResult]) -> list[dict[str, Any]]:

@@ -135,11 +135,13 @@ def play_quadruped(
     terrain: str = "rigid",
     max_episode_steps: int | None = None,
     progress: bool = True,
+    video_seconds: float = 5.0,
 ) -> list[dict[str, Any]]:
     """Roll the checkpoint's policy out for each command; return the summary rows.
 
-    With ``video`` the first episode of every command is rendered offscreen (needs an
-    OpenGL backend: EGL, or OSMesa with ``MUJOCO_GL=osmesa``) into one MP4/GIF.
+    With ``video`` the first ``video_seconds`` of the first episode of every command are
+    rendered offscreen (needs an OpenGL backend: EGL, or OSMesa with ``MUJOCO_GL=osmesa``)
+    into one MP4, GIF or PNG film strip.
     """
     import gymnasium as gym
 
@@ -166,6 +168,7 @@ def play_quadruped(
             seed=seed,
             video=video,
             progress=progress,
+            video_seconds=video_seconds,
         )
     finally:
         env.close()
