@@ -306,7 +306,6 @@ def test_same_seed_same_trajectory_on_ray_and_in_gymnasium(ray_cluster):
     import gymnasium as gym
     from gymnasium.utils.env_checker import data_equivalence
 
-
     kwargs = {
         "randomization": DomainRandomization(push_interval_s=0.1),
         "max_episode_steps": 12,

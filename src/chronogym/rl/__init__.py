@@ -15,19 +15,38 @@ _EXPORTS = {
     "train": "chronogym.rl.trainer",
     "TrainResult": "chronogym.rl.trainer",
     "load_policy": "chronogym.rl.trainer",
+    "make_quadruped_vec_env": "chronogym.rl.quadruped",
+    "train_quadruped": "chronogym.rl.quadruped",
+    "play_quadruped": "chronogym.rl.quadruped",
+    "quadruped_train_config": "chronogym.rl.quadruped",
+    "evaluate": "chronogym.rl.evaluate",
+    "VideoRecorder": "chronogym.rl.evaluate",
 }
 
 __all__ = [
     "FINETUNE_PPO",
     "RslRlVecEnv",
     "TrainResult",
+    "VideoRecorder",
+    "evaluate",
     "load_policy",
+    "make_quadruped_vec_env",
+    "play_quadruped",
     "ppo_train_config",
+    "quadruped_train_config",
     "train",
+    "train_quadruped",
 ]
 
 if TYPE_CHECKING:
     from chronogym.rl.config import FINETUNE_PPO, ppo_train_config
+    from chronogym.rl.evaluate import VideoRecorder, evaluate
+    from chronogym.rl.quadruped import (
+        make_quadruped_vec_env,
+        play_quadruped,
+        quadruped_train_config,
+        train_quadruped,
+    )
     from chronogym.rl.trainer import TrainResult, load_policy, train
     from chronogym.rl.vecenv import RslRlVecEnv
 
