@@ -22,9 +22,11 @@ import json
 import math
 import os
 import platform
+import shutil
 from pathlib import Path
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "rl_scaling"
+DEFAULT_RUNS = Path("runs") / "rl_scaling"  # checkpoints and TensorBoard events (not results)
 DEFAULT_CONFIGS = ("ray-1", "ray-8", "ray-16", "serial-16")
 SHORT_MINUTES = 2.0
 FULL_MINUTES = 30.0
@@ -39,14 +41,16 @@ def parse_config(name: str) -> tuple[str, int]:
     return backend, int(count)
 
 
-def run_config(name: str, minutes: float, out: Path, seed: int) -> dict:
+def run_config(name: str, minutes: float, out: Path, runs: Path, seed: int) -> dict:
     from chronogym.rl.quadruped import train_quadruped
 
     backend, num_envs = parse_config(name)
     result = train_quadruped(
-        out / name, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed
+        runs / name, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed
     )
-    rows = read_rows(Path(result.csv_path))
+    csv_path = out / f"{name}.csv"
+    shutil.copyfile(result.csv_path, csv_path)
+    rows = read_rows(csv_path)
     return {
         "config": name,
         "backend": backend,
@@ -56,7 +60,7 @@ def run_config(name: str, minutes: float, out: Path, seed: int) -> dict:
         "wall_time": result.wall_time,
         "env_steps_per_s": result.env_steps / result.wall_time if result.wall_time else math.nan,
         "final": rows[-1] if rows else {},
-        "csv": str(Path(result.csv_path).resolve()),
+        "csv": csv_path.name,
     }
 
 
@@ -86,10 +90,12 @@ def plot(summaries: list[dict], path: Path, minutes: float) -> None:
         ("y_mse", "episode-mean y-velocity MSE (m/s)²"),
     )
     for summary in summaries:
-        rows = read_rows(Path(summary["csv"]))
+        rows = read_rows(path.parent / summary["csv"])
         minutes_axis = [row["wall_time"] / 60 for row in rows]
         for axis, (key, _) in zip(axes, panels, strict=True):
-            axis.plot(minutes_axis, smoothed([row[key] for row in rows]), label=summary["config"])
+            window = 5 if key == "mean_reward" else 30  # MSEs: a few episodes per iteration
+            values = smoothed([row[key] for row in rows], window)
+            axis.plot(minutes_axis, values, label=summary["config"])
     for axis, (key, label) in zip(axes, panels, strict=True):
         axis.set_xlabel("wall-clock time (min)")
         axis.set_ylabel(label)
@@ -112,7 +118,8 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help=f"{FULL_MINUTES:g} min each")
     parser.add_argument("--configs", nargs="+", default=list(DEFAULT_CONFIGS))
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="CSVs, PNG and JSON")
+    parser.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="checkpoints, events")
     args = parser.parse_args()
     for name in args.configs:
         parse_config(name)
@@ -123,7 +130,7 @@ def main() -> None:
     summaries = []
     for name in args.configs:
         print(f"== {name}: {minutes:g} min")
-        summaries.append(run_config(name, minutes, args.out, args.seed))
+        summaries.append(run_config(name, minutes, args.out, args.runs, args.seed))
     print(
         f"{'config':>10} {'iters':>6} {'env steps':>10} {'steps/s':>8} {'reward':>8} "
         f"{'x_mse':>7} {'y_mse':>7}"

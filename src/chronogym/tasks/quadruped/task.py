@@ -18,7 +18,7 @@ Episode: 20 s (1000 steps at 50 Hz); terminated when the base tilts past ``max_t
 trunk or a hip touches the ground; truncated by the time limit.
 Physics: ``dt`` = 5 ms, ``k`` = 4 (50 Hz policy), implicitfast integrator, elliptic friction
 cone with ``impratio`` 100: on a 25 deg slope its feet creep ~1 mm in 2 s against ~95 mm with
-the pyramidal cone, for 10-35 % more physics time (``benchmarks/quadruped_physics.py``).
+the pyramidal cone, for ~1.7x the physics time (``benchmarks/quadruped_physics.py``).
 """
 
 from __future__ import annotations
