@@ -123,6 +123,9 @@ def test_killing_the_cli_driver_then_rerunning_resumes(tmp_path):
         "--backend",
         "serial",
     ]
+    # Create the schema first: the CLI and this test's polling would otherwise both run the
+    # first-use migration of the SQLite file at once (UNIQUE constraint on alembic_version).
+    optuna.storages.RDBStorage(url)
     first = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 120
     completed_before = 0
@@ -131,7 +134,7 @@ def test_killing_the_cli_driver_then_rerunning_resumes(tmp_path):
         if db.exists():
             try:
                 study = optuna.load_study(study_name="resume", storage=url)
-            except (KeyError, sqlalchemy.exc.OperationalError):
+            except (KeyError, sqlalchemy.exc.SQLAlchemyError):  # not created yet / locked
                 continue
             completed_before = sum(t.state.name == "COMPLETE" for t in study.trials)
             if completed_before >= 3:
