@@ -1,6 +1,7 @@
 """SCM soil under MuJoCo bodies against closed forms: Bekker sinkage, elastic unloading and ruts,
 Janosi-Hanamoto shear, passivity and energy balance, reset, determinism, bulldozed volume, one
-owner per node, geometry (vs mj_ray), the Go1 through the Advancer, parameter errors."""
+owner per node (also on unloading), geometry (vs mj_ray), the compiled tick against a NumPy
+reference, the Go1 through the Advancer, parameter errors, import weight."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from chronogym.terrain import (
     MujocoSoil,
     SoilParameters,
     exclude_ground_contacts,
+    patch_inverse_width,
     soil_preset,
 )
 
@@ -136,6 +138,27 @@ def test_bulldozing_conserves_soil_volume():
     assert soil.plastic_sinkage.sum() > 0.1  # m, summed over nodes
     assert pile.sum() == pytest.approx(soil.plastic_sinkage.sum(), rel=1e-12)
     assert soil.heights.max() > 0.002 and soil.heights.min() < -0.02  # a rim around the rut
+
+
+def test_bulldozing_conserves_volume_under_overlapping_geoms():
+    """Go1 calves (capsule + foot sphere, whose blocks overlap) walking on soft soil."""
+    model, data = load_go1()
+    calves = [f"{leg}_calf" for leg in ("FR", "FL", "RR", "RL")]
+    soil = MujocoSoil(model, data, "soft", bodies=calves, extent=(2, 2), resolution=RES,
+                      bulldozing=True)  # fmt: skip
+    soil.exclude_ground("floor")
+    rng = np.random.default_rng(0)
+    home, offset = data.ctrl.copy(), np.zeros(model.nu)
+    for tick in range(300):
+        if tick % 4 == 0:
+            offset = 0.8 * offset + 0.2 * rng.normal(0.0, 0.3, size=model.nu)
+            data.ctrl[:] = home + offset
+        soil.Advance(model.opt.timestep)
+        mujoco.mj_step(model, data)
+    grid = soil.grid
+    pile = grid.interior(grid.level0) - grid.reset_level
+    assert soil.plastic_sinkage.sum() > 10.0
+    assert pile.sum() == pytest.approx(soil.plastic_sinkage.sum(), rel=1e-12)
 
 
 def test_dragged_plate_follows_janosi_hanamoto():
@@ -336,6 +359,33 @@ def test_node_under_two_geoms_counts_once(extra):
     assert np.allclose(pressure_both, pressure_alone, rtol=1e-9, atol=1e-6)
 
 
+def test_hidden_geom_does_not_undo_the_rut():
+    """A thin capsule inside a sphere (as a calf above its foot) changes nothing, also on
+    unloading: only the owner of a contact node writes its plastic sinkage and shear."""
+
+    def pressed(geoms: str) -> tuple[np.ndarray, np.ndarray]:
+        xml = f"""<mujoco><worldbody><body name="b" pos="0.004 0.002 0.03">
+          <joint type="slide" axis="0 0 1"/>{geoms}</body></worldbody></mujoco>"""
+        model = mujoco.MjModel.from_xml_string(xml)
+        data = mujoco.MjData(model)
+        soil = MujocoSoil(model, data, "firm", bodies=["b"], extent=(0.3, 0.3), resolution=0.005)
+        forces = []
+        for tick in range(60):  # 2 cm down, then 4 mm back up
+            data.qpos[0] = -0.0005 * min(tick, 40) + 0.0002 * max(tick - 40, 0)
+            data.qvel[0] = -0.25 if tick < 40 else 0.1
+            soil.Advance(0.002)
+            forces.append(soil.forces_on("b")[2])
+        return np.array(forces), soil.plastic_sinkage
+
+    sphere = '<geom type="sphere" size="0.03"/>'
+    capsule = '<geom type="capsule" size="0.015" fromto="0 0 0  0 0 0.1"/>'
+    alone, rut_alone = pressed(sphere)
+    both, rut_both = pressed(sphere + capsule)
+    assert alone.max() > 50.0 and alone[-1] == 0.0 and rut_alone.max() > 0.015
+    assert np.allclose(both, alone, rtol=1e-12, atol=1e-9)
+    assert np.allclose(rut_both, rut_alone, rtol=0.0, atol=1e-12)
+
+
 @pytest.mark.parametrize("surface", [1.0, 0.025])
 @pytest.mark.parametrize("kind", ["sphere", "capsule", "ellipsoid", "cylinder", "box"])
 def test_lower_surface_matches_mj_ray(kind, surface):
@@ -361,6 +411,84 @@ def test_lower_surface_matches_mj_ray(kind, surface):
                 expected[i, j] = min(surface, -1.0 + dist)
     assert np.count_nonzero(expected < surface) > 20
     assert np.allclose(soil.heights, expected, atol=1e-9, rtol=0.0)
+
+
+def _reference_tick(model, data, soil, dt: float):
+    """One tick in NumPy from the state before it: lower surface by mj_ray, Bekker width by
+    ``patch_inverse_width``, velocity by ``mj_objectVelocity``, law by ``ScmLaw.update``."""
+    grid, law = soil.grid, soil.law
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    mujoco.mj_comVel(model, data)
+    level0, plastic, shear = (grid.interior(a).copy() for a in grid.state)
+    x, y = np.meshgrid(grid.x, grid.y, indexing="ij")
+    surface = np.full(grid.shape, 1.0)  # above the soil where the vertical line misses the geom
+    geomid = np.zeros(1, dtype=np.int32)
+    for i, j in np.ndindex(grid.shape):
+        dist = mujoco.mj_ray(model, data, np.array([x[i, j], y[i, j], -1.0]),
+                             np.array([0, 0, 1.0]), None, 1, -1, geomid)  # fmt: skip
+        if dist >= 0:
+            surface[i, j] = -1.0 + dist
+    sinkage = level0 - surface
+    elastic = sinkage - plastic
+    contact = (elastic > 0.0).astype(float)
+    modulus = law.modulus_area(patch_inverse_width(contact[None] > 0.0, grid.resolution)[0])
+    body = model.body("b").id
+    velocity = np.zeros(6)
+    mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
+    arm = np.stack([x, y, surface], axis=-1) - data.xipos[body]
+    v = velocity[3:] + np.cross(velocity[:3], arm)
+    slip = np.hypot(v[..., 0], v[..., 1])
+    normal, tau, plastic_new, shear_new, _ = law.update(
+        sinkage, elastic, plastic, shear, contact, v[..., 2], slip, modulus, dt
+    )
+    coef = tau / np.maximum(slip, 1e-4)
+    mass = model.body_mass[body]
+    coef *= mass / max(-dt * coef.sum(), mass)
+    force = np.stack([v[..., 0] * coef, v[..., 1] * coef, normal], axis=-1)
+    wrench = np.concatenate([force.sum(axis=(0, 1)), np.cross(arm, force).sum(axis=(0, 1))])
+    return wrench, plastic_new, shear_new, normal / grid.node_area, contact
+
+
+@pytest.mark.parametrize("kind", ["capsule", "box"])
+def test_compiled_tick_matches_numpy_reference(kind):
+    """lete_sand (Kc, cohesion, n != 1): a tilted geom pushed down and sideways while spinning,
+    so that ruts, shear displacement, damping and the shear scaling all take part."""
+    size = {"capsule": "0.03 0.05", "box": "0.05 0.03 0.02"}[kind]
+    xml = f"""<mujoco><compiler angle="radian"/><worldbody>
+      <body name="b" pos="0.013 -0.007 0.045" euler="0.5 -0.9 0.3"><freejoint/>
+      <geom type="{kind}" size="{size}" mass="3"/></body></worldbody></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    soil = MujocoSoil(model, data, "lete_sand", bodies=["b"], extent=(0.3, 0.3), resolution=0.005)
+    dt, start = 0.002, data.qpos[:3].copy()
+    checked = 0
+    for tick in range(25):
+        data.qpos[:3] = start + tick * dt * np.array([0.4, -0.2, -1.0])
+        data.qvel[:] = [0.4, -0.2, -1.0 if tick < 20 else 0.3, 1.5, -1.0, 2.0]
+        wrench, plastic, shear, pressure, contact = _reference_tick(model, data, soil, dt)
+        soil.Advance(dt)
+        scale = np.abs(wrench).max() + 1.0
+        assert np.allclose(soil.forces_on("b"), wrench, rtol=1e-7, atol=1e-9 * scale)
+        # mj_ray's surface agrees to ~1e-12 m, and the plastic sinkage inherits that.
+        assert np.allclose(soil.plastic_sinkage, plastic, rtol=0.0, atol=1e-10)
+        assert np.allclose(soil.shear_displacement, shear, rtol=0.0, atol=1e-12)
+        assert np.allclose(soil.pressure, pressure, rtol=1e-7, atol=1e-6 * pressure.max() + 1e-9)
+        checked += contact.sum() > 20
+    assert checked >= 15 and soil.plastic_sinkage.max() > 0.01
+    assert soil.shear_displacement.max() > 0.01
+
+
+def test_terrain_import_stays_light():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, chronogym.terrain; "
+        "print(sorted(m for m in ('numba', 'mujoco', 'ray', 'torch') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
 
 
 @pytest.mark.parametrize(

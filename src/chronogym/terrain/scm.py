@@ -27,14 +27,14 @@ Shear
     velocity; ``j`` is the path length slipped while the node stays in contact (``|v_t| dt``
     per tick, the value at the start of the tick is used) and is reset when it leaves contact.
 
-Why vectorized NumPy
-    Each tick touches tens (feet) to a few thousand (plates, wheels) nodes in small square
-    blocks around the bodies. A Python loop costs about a microsecond per node per formula;
-    NumPy costs 0.4-1 microsecond per array operation whatever the block size, so a tick is a
-    fixed ~70 array operations independent of the field size and nearly of the block size.
-    That call overhead, not arithmetic, is the limit: for the Go1's four feet a tick costs
-    60-80 us, 4-5x a 15 us ``mj_step``. A compiled kernel (numba, C) would cut it ~10x, but
-    numba is not installed and chronogym adds no dependency for it.
+Where it runs
+    :class:`ScmLaw` holds the law's constants and :meth:`ScmLaw.update` is its NumPy form (the
+    reference the tests check the compiled tick against). The per-tick hot path of
+    ``MujocoSoil`` is compiled with numba (``_kernels``): each tick touches tens (feet) to a few
+    thousand (plates, wheels) nodes, and as NumPy array operations a tick was ~70 calls of
+    0.4-1 us fixed overhead each whatever the block size (60-80 us for the Go1's four feet,
+    4x a rigid ``mj_step``); compiled loops visit each node once, in tens of ns (4-6 us per
+    Go1 tick, plus ~2 us of MuJoCo kinematics).
 
 Units
     :class:`ScmLaw` works in force per node (pressure x node area), folded into its constants.
@@ -114,9 +114,10 @@ class SoilGrid:
         reset_level[margin : margin + nx, margin : margin + ny] = self._check_level(level)
         self._reset_level = reset_level.reshape(-1)
         self._reset_level.setflags(write=False)
-        self.level0 = self._reset_level.copy()
-        self.plastic = np.zeros_like(self.level0)
-        self.shear = np.zeros_like(self.level0)
+        #: ``(3, N)``: rows ``level0``, ``plastic``, ``shear`` (one array for the compiled tick).
+        self.state = np.zeros((3, self._reset_level.size))
+        self.level0, self.plastic, self.shear = self.state
+        np.copyto(self.level0, self._reset_level)
         self.top = float(self.interior(self.level0).max())
 
     def _check_level(self, level: float | np.ndarray) -> np.ndarray:
