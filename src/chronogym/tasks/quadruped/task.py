@@ -164,20 +164,15 @@ class Go1VelocityTask(MujocoTask):
         self._home_key = model.key(HOME_KEYFRAME).id
         self._trunk = model.body(BASE_BODY_NAME).id
         self._nominal_trunk_mass = float(model.body_mass[self._trunk])
-        floor = model.geom("floor").id
-        self._floor = floor
-        self._nominal_floor_friction = model.geom_friction[floor].copy()
+        self._floor = model.geom("floor").id
         self._foot_geoms = np.array([model.geom(n).id for n in FOOT_GEOM_NAMES])
-        self._nominal_foot_friction = model.geom_friction[self._foot_geoms].copy()
         # Role of each geom in a contact: 1..4 = foot index + 1, -1 = trunk or hip (fatal), 0 other.
-        self._geom_role = np.zeros(model.ngeom, dtype=np.int64)
-        for leg, geom in enumerate(self._foot_geoms):
-            self._geom_role[geom] = leg + 1
-        fatal = [self._trunk] + [model.body(f"{leg}_hip").id for leg in LEG_NAMES]
-        for geom in range(model.ngeom):
-            if model.geom_bodyid[geom] in fatal:
-                self._geom_role[geom] = -1
-        self._geom_roles: list[int] = self._geom_role.tolist()
+        fatal = {self._trunk} | {model.body(f"{leg}_hip").id for leg in LEG_NAMES}
+        self._geom_roles: list[int] = [
+            -1 if int(model.geom_bodyid[geom]) in fatal else 0 for geom in range(model.ngeom)
+        ]
+        for leg, geom in enumerate(self._foot_geoms.tolist()):
+            self._geom_roles[geom] = leg + 1
         self._obs_scale = _scale_vector()
         self._rot = np.zeros(9)
         self._obs_raw = np.zeros(OBS_DIM)
@@ -193,7 +188,6 @@ class Go1VelocityTask(MujocoTask):
         self._weighted = np.zeros(len(REWARD_TERMS))
         self._episode_sum = np.zeros(len(REWARD_TERMS))
         self._action_change = np.zeros(ACTION_DIM)
-        self._vxy = (0.0, 0.0)
         self._steps = 0
         self._fell = False
         self._base_contact = False
@@ -304,10 +298,9 @@ class Go1VelocityTask(MujocoTask):
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:
         self._update_contacts()
-        weighted = self._raw_terms() * self._term_weights
-        self._weighted = weighted
+        weighted = np.multiply(self._raw_terms(), self._term_weights, out=self._weighted)
         self._episode_sum += weighted
-        vx, vy = self._vxy
+        vx, vy = self.base_lin_vel[0:2].tolist()
         ex, ey = vx - self.command[0], vy - self.command[1]
         self._sq_err[0] += ex * ex
         self._sq_err[1] += ey * ey
@@ -330,7 +323,6 @@ class Go1VelocityTask(MujocoTask):
         """Unweighted value of every term, in ``REWARD_TERMS`` order (one preallocated array)."""
         data = self.data
         vx, vy, vz = self.base_lin_vel.tolist()
-        self._vxy = (vx, vy)
         wx, wy, wz, gx, gy = self._obs_raw[0:5].tolist()
         cmd_x, cmd_y, cmd_wz = self.command.tolist()
         np.subtract(self.last_action, self.prev_action, out=self._action_change)
