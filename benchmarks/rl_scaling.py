@@ -41,12 +41,15 @@ def parse_config(name: str) -> tuple[str, int]:
     return backend, int(count)
 
 
-def run_config(name: str, minutes: float, out: Path, runs: Path, seed: int) -> dict:
+def run_config(
+    name: str, minutes: float, out: Path, runs: Path, seed: int, **train_kwargs: object
+) -> dict:
+    """Train one configuration (``train_kwargs`` go to ``train_quadruped``); its summary."""
     from chronogym.rl.quadruped import train_quadruped
 
     backend, num_envs = parse_config(name)
     result = train_quadruped(
-        runs / name, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed
+        runs / name, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed, **train_kwargs
     )
     csv_path = out / f"{name}.csv"
     shutil.copyfile(result.csv_path, csv_path)
@@ -77,7 +80,8 @@ def smoothed(values: list[float], window: int = 5) -> list[float]:
     return out
 
 
-def plot(summaries: list[dict], path: Path, minutes: float) -> None:
+def plot(summaries: list[dict], path: Path, title: str) -> None:
+    """The paper's three panels (reward, x and y velocity MSE against wall time)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -103,13 +107,25 @@ def plot(summaries: list[dict], path: Path, minutes: float) -> None:
         if key != "mean_reward":
             axis.set_yscale("log")
     axes[0].legend(title="backend-n_env")
-    fig.suptitle(
-        f"Go1 velocity tracking, PPO [512, 256, 128], {minutes:g} min per configuration, "
-        f"{os.cpu_count()} CPUs"
-    )
+    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def print_table(summaries: list[dict]) -> None:
+    """One row per configuration: iterations, env steps, throughput, last iteration's means."""
+    print(
+        f"{'config':>10} {'iters':>6} {'env steps':>10} {'steps/s':>8} {'reward':>8} "
+        f"{'x_mse':>7} {'y_mse':>7}"
+    )
+    for s in summaries:
+        final = s["final"]
+        print(
+            f"{s['config']:>10} {s['iterations']:6d} {s['env_steps']:10d} "
+            f"{s['env_steps_per_s']:8.0f} {final.get('mean_reward', math.nan):8.2f} "
+            f"{final.get('x_mse', math.nan):7.4f} {final.get('y_mse', math.nan):7.4f}"
+        )
 
 
 def main() -> None:
@@ -131,19 +147,13 @@ def main() -> None:
     for name in args.configs:
         print(f"== {name}: {minutes:g} min")
         summaries.append(run_config(name, minutes, args.out, args.runs, args.seed))
-    print(
-        f"{'config':>10} {'iters':>6} {'env steps':>10} {'steps/s':>8} {'reward':>8} "
-        f"{'x_mse':>7} {'y_mse':>7}"
-    )
-    for s in summaries:
-        final = s["final"]
-        print(
-            f"{s['config']:>10} {s['iterations']:6d} {s['env_steps']:10d} "
-            f"{s['env_steps_per_s']:8.0f} {final.get('mean_reward', math.nan):8.2f} "
-            f"{final.get('x_mse', math.nan):7.4f} {final.get('y_mse', math.nan):7.4f}"
-        )
+    print_table(summaries)
     png = args.out / "rl_scaling.png"
-    plot(summaries, png, minutes)
+    title = (
+        f"Go1 velocity tracking, PPO [512, 256, 128], {minutes:g} min per configuration, "
+        f"{os.cpu_count()} CPUs"
+    )
+    plot(summaries, png, title)
     result = {
         "benchmark": "rl_scaling",
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),

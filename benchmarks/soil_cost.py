@@ -17,6 +17,11 @@ floor only touches geoms the soil does not hold). The first soil tick in the pro
 the numba kernel (or loads it from the cache); it is timed apart (``first_advance_s``) and not
 counted in the rows.
 
+A second table times the Go1 task itself (``SimEnv.step``: observation, reward, the soil window
+following the trunk) at each terrain's default physics step, rigid 5 ms x 4 against soil
+2 ms x 10 (the soil's explicit force law needs the smaller step, ``PHYSICS_STEP``): the cost
+of a soil episode against a rigid one, as training pays it.
+
     python benchmarks/soil_cost.py [--out benchmarks/results/soil_cost.json]
 """
 
@@ -124,6 +129,39 @@ def run(model, data, soil, targets: np.ndarray) -> tuple[float, dict]:
     return elapsed, stats
 
 
+def task_episodes(targets: np.ndarray, repeats: int) -> list[dict]:
+    """The Go1 task as training runs it (``SimEnv.step``, the task's defaults per terrain:
+    rigid 5 ms x 4, soil 2 ms x 10 with the window following the trunk), the same targets."""
+    from chronogym.env import SimEnv
+    from chronogym.tasks.quadruped import DEFAULT_JOINT_POS, Go1VelocityTask
+
+    actions = ((targets - DEFAULT_JOINT_POS) / 0.25).astype(np.float32)
+    rows, rigid_us = [], math.nan
+    for terrain in ("rigid", "soil"):
+        env = SimEnv(Go1VelocityTask(terrain=terrain, max_episode_steps=None))
+        best = math.inf
+        for _ in range(repeats):
+            env.reset(seed=0, options={"command": (0.5, 0.0, 0.0)})
+            start = time.perf_counter()
+            for action in actions:
+                _, _, terminated, _, _ = env.step(action)
+                if terminated:
+                    env.reset(seed=0, options={"command": (0.5, 0.0, 0.0)})
+            best = min(best, time.perf_counter() - start)
+        us = best / len(actions) * 1e6
+        rigid_us = us if terrain == "rigid" else rigid_us
+        task = env.task
+        row = {"terrain": terrain, "dt": task.dt, "k": task.k, "us_per_policy_step": us}
+        row["ratio"] = us / rigid_us
+        if task.soil is not None:
+            grid = task.soil.grid
+            row["window_mb"] = grid.state.nbytes / 1e6
+            row["archive_mb"] = grid.archive.nbytes / 1e6 if grid.archive is not None else 0.0
+        rows.append(row)
+        env.close()
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
@@ -155,6 +193,14 @@ def main() -> None:
             f"{row.setting:>10} {row.us_per_step:8.1f} {row.ratio:6.2f} {row.base_height:7.3f} "
             f"{row.max_sinkage_mm:8.1f} {row.falls:5d} {row.contacts_per_step:5.2f}"
         )
+    episodes = task_episodes(targets, max(1, args.repeats // 2))
+    print("\nGo1 task, SimEnv.step at each terrain's default physics step (policy at 50 Hz):")
+    print(f"{'terrain':>8} {'dt_ms':>6} {'k':>3} {'us/policy step':>15} {'ratio':>6}")
+    for row in episodes:
+        print(
+            f"{row['terrain']:>8} {row['dt'] * 1e3:6.1f} {row['k']:3d} "
+            f"{row['us_per_policy_step']:15.1f} {row['ratio']:6.2f}"
+        )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     result = {
         "benchmark": "soil_cost",
@@ -171,6 +217,7 @@ def main() -> None:
         "resolution": RESOLUTION,
         "extent": EXTENT,
         "rows": [asdict(row) for row in rows],
+        "task_episodes": episodes,
     }
     args.out.write_text(json.dumps(result, indent=2))
     print(f"first soil tick (kernel compile or cache load): {first_advance_s:.2f} s")

@@ -271,6 +271,9 @@ def test_pushes_kick_the_base_at_the_interval():
         ({"cone": "round"}, "cone"),
         ({"reset_joint_noise": 2.0}, "reset_joint_noise"),
         ({"kp": -1.0}, r"kp=-1.0: expected None"),
+        ({"terrain": "mud"}, r"terrain='mud': expected one of rigid, soil"),
+        ({"terrain": "soil", "soil": "clay"}, r"soil preset 'clay'"),
+        ({"terrain": "soil", "soil_window": 0.1}, "soil_window=0.1"),
     ],
 )
 def test_bad_settings_name_the_value(kwargs, message):
@@ -330,6 +333,71 @@ def test_same_seed_same_trajectory_on_ray_and_in_gymnasium(ray_cluster):
             results.append(steps)
         assert data_equivalence(results[0], results[1], exact=True)
         assert any(step[3].any() for step in results[0][1:])  # episodes ended and restarted
+    finally:
+        ray_vec.close()
+        sync_vec.close()
+
+
+def _soil_env(**kwargs) -> SimEnv:
+    env = SimEnv(Go1VelocityTask(terrain="soil", reset_joint_noise=0.0, **kwargs))
+    env.reset(seed=0, options={"command": (0.0, 0.0, 0.0)})
+    return env
+
+
+def test_soil_carries_the_standing_robot_and_reset_restores_it():
+    env = _soil_env()
+    task = env.task
+    assert (task.dt, task.k) == (0.002, 10)
+    assert task.advanceables[0] is task.soil
+    for _ in range(50):
+        env.step(np.zeros(12, dtype=np.float32))
+    forces = task.soil.body_forces
+    assert task.feet_contact_now.all()  # every leg stands on the soil
+    assert forces[:, 2].sum() == pytest.approx(task.model.body_subtreemass[1] * 9.81, rel=0.1)
+    assert task.data.ncon == 0  # the floor no longer touches the legs
+    ruts = task.soil.plastic_sinkage.max()
+    assert 0.005 < ruts < 0.1  # Chrono's "firm" soil: a few cm under a 12 kg robot
+    assert 0.15 < task.data.qpos[2] < task.base_height_target
+    env.reset(seed=0, options={"command": (0.0, 0.0, 0.0)})
+    assert task.soil.plastic_sinkage.max() == 0.0 and task.soil.grid.offset == (0, 0)
+
+
+def test_the_soil_window_follows_the_trunk():
+    env = _soil_env(soil_window=1.0)
+    task = env.task
+    task.data.qpos[0] += 2.0  # carry the robot 2 m along x, off the first window
+    task.forward()
+    for _ in range(30):
+        env.step(np.zeros(12, dtype=np.float32))
+    assert abs(task.soil.grid.center[0] - task.data.qpos[0]) <= 0.25
+    assert task.feet_contact_now.all() and task.data.qpos[2] > 0.15  # still on the soil
+
+
+def test_same_seed_same_trajectory_on_soil_on_ray_and_in_gymnasium(ray_cluster):
+    """Go1 on soil: RayVectorEnv (2 workers) == Gymnasium's SyncVectorEnv, bit for bit."""
+    from gymnasium.utils.env_checker import data_equivalence
+
+    kwargs = {"terrain": "soil", "max_episode_steps": 8}
+    same_step = gym.vector.AutoresetMode.SAME_STEP
+    ray_vec = chronogym.make_vec(
+        "chronogym/Go1Velocity-v0", 2, backend="ray", envs_per_worker=1,
+        autoreset_mode=same_step, env_kwargs=kwargs,
+    )  # fmt: skip
+    sync_vec = gym.make_vec(
+        "chronogym/Go1Velocity-v0", 2, vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": same_step}, **kwargs,
+    )  # fmt: skip
+    try:
+        results = []
+        for vec in (ray_vec, sync_vec):
+            obs, _ = vec.reset(seed=11)
+            steps = [obs]
+            for actions in np.random.default_rng(2).normal(0, 1, (20, 2, 12)).astype(np.float32):
+                obs, reward, terminated, truncated, infos = vec.step(actions)
+                steps.append((obs, reward, terminated, truncated, infos.get("final_obs")))
+            results.append(steps)
+        assert data_equivalence(results[0], results[1], exact=True)
+        assert any(step[3].any() for step in results[0][1:])  # episodes restarted on fresh soil
     finally:
         ray_vec.close()
         sync_vec.close()

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 ENV_ID = "chronogym/Go1Velocity-v0"
-TERRAINS = ("rigid",)
+TERRAINS = ("rigid", "soil")
 BACKENDS = ("ray", "serial")
 
 
@@ -41,7 +41,7 @@ def env_kwargs_for(terrain: str) -> dict[str, Any]:
     """Keyword arguments of the task for a terrain name."""
     if terrain not in TERRAINS:
         raise ValueError(f"terrain={terrain!r}: expected one of {TERRAINS}")
-    return {}
+    return {} if terrain == "rigid" else {"terrain": terrain}
 
 
 def make_quadruped_vec_env(

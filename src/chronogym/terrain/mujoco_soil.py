@@ -216,6 +216,7 @@ class MujocoSoil:
         center: Sequence[float] = (0.0, 0.0),
         level: float | np.ndarray = 0.0,
         bulldozing: bool = False,
+        follow: bool | str | int = False,
     ) -> None:
         if type(model).__name__ != "MjModel" or type(data).__name__ != "MjData":
             raise ValueError(
@@ -250,6 +251,7 @@ class MujocoSoil:
         self.body_ids = np.unique(geom_bodies)
         self.grid = SoilGrid(extent, res, center, level, margin=max(widths.values()) + 2 * rim)
         self.law = ScmLaw(self.params, self.grid.node_area)
+        self.follow_body = self._follow_body(follow, level)
         self._k = _compiled()  # numba: imported once a soil is built
         self._tick = self._k.soil_tick
         self._setup_tables(order, geom_bodies, widths, rim)
@@ -273,6 +275,53 @@ class MujocoSoil:
             self._last_nodes,
         )
         self._mj: tuple | None = None
+
+    def _follow_body(self, follow: bool | str | int, level: float | np.ndarray) -> int | None:
+        """The body the window follows (``None``: a fixed field)."""
+        if follow is False:
+            return None
+        if np.ndim(level) != 0:
+            raise ValueError(
+                "follow with an array level: expected a float level (a moving window has "
+                "uniform soil ahead of it)"
+            )
+        if follow is True:
+            roots = {int(self.model.body_rootid[b]) for b in self.body_ids}
+            if len(roots) != 1:
+                raise ValueError(
+                    f"follow=True with soil bodies under {len(roots)} root bodies: expected one "
+                    "root, or the name of the body to follow"
+                )
+            return roots.pop()
+        return _object_id(self.model, "body", follow, self.model.nbody)
+
+    def _recentre(self) -> None:
+        """Move the window over the followed body when it is more than a quarter of the
+        window from the centre (a shift of whole nodes; see ``SoilGrid.shift``)."""
+        grid = self.grid
+        x, y = self.data.xipos[self.follow_body, :2].tolist()
+        cx, cy = grid.center
+        res = grid.resolution
+        if (
+            abs(x - cx) * 4 <= (grid.shape[0] - 1) * res
+            and abs(y - cy) * 4 <= (grid.shape[1] - 1) * res
+        ):
+            return
+        delta = grid.shift(round((x - cx) / res), round((y - cy) / res))
+        K = self._k
+        self._const[K.C_ORIGIN_X], self._const[K.C_ORIGIN_Y] = grid.origin
+        # Last tick's contact nodes (their shear resets when they lift), now moved by delta;
+        # any the window left behind (bodies spread over more than half of it) are dropped.
+        count = int(self._last_nodes[0])
+        nodes = self._last_nodes[1 : 1 + count] - delta
+        row, col = np.divmod(nodes, grid.stride)
+        inside = (row >= grid.margin) & (row < grid.margin + grid.shape[0])
+        inside &= (col >= grid.margin) & (col < grid.margin + grid.shape[1])
+        kept = nodes[inside]
+        self._last_nodes[0] = kept.size
+        self._last_nodes[1 : 1 + kept.size] = kept
+        self._nidx -= delta
+        self._gint[:, K.GI_ACTIVE] = 0  # the accessors' view of the last tick is gone
 
     def _setup_tables(
         self, order: list[int], geom_bodies: np.ndarray, widths: dict[int, int], rim: int
@@ -343,6 +392,8 @@ class MujocoSoil:
         kinematics(model, data)
         com_pos(model, data)
         com_vel(model, data)
+        if self.follow_body is not None:
+            self._recentre()
         grid = self.grid
         grid.top = self._tick(*self._args, float(grid.top), float(dt))
 
@@ -359,6 +410,7 @@ class MujocoSoil:
     def reset(self) -> None:
         """Restore the initial soil (heights, plastic sinkage, shear) and zero the soil wrench."""
         self.grid.reset()
+        self._const[self._k.C_ORIGIN_X], self._const[self._k.C_ORIGIN_Y] = self.grid.origin
         self._last_nodes[0] = 0
         self._gint[:, self._k.GI_ACTIVE] = 0
         self._bflt[:, self._k.BF_WRENCH : self._k.BF_WRENCH + 6] = 0.0
@@ -368,6 +420,14 @@ class MujocoSoil:
     def exclude_ground(self, ground: str | int = "floor") -> int:
         """``exclude_ground_contacts(model, ground, soil geoms)``; returns the bit used."""
         return exclude_ground_contacts(self.model, ground, self.geom_ids)
+
+    @property
+    def body_forces(self) -> np.ndarray:
+        """Read-only view of the last soil wrench on each soil body, ``(B, 6)``: world force
+        then torque about its CoM, rows in ``body_ids`` order (updated in place each tick)."""
+        view = self._bflt[:, self._k.BF_WRENCH : self._k.BF_WRENCH + 6]
+        view.flags.writeable = False
+        return view
 
     def forces_on(self, body: str | int) -> np.ndarray:
         """Last soil wrench on ``body``: world force (3,) then torque about its CoM (3,)."""

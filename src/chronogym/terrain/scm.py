@@ -47,6 +47,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from chronogym.terrain.archive import TileArchive
 from chronogym.terrain.params import SoilParameters
 
 __all__ = ["ScmLaw", "SoilGrid", "patch_inverse_width"]
@@ -119,6 +120,13 @@ class SoilGrid:
         self.level0, self.plastic, self.shear = self.state
         np.copyto(self.level0, self._reset_level)
         self.top = float(self.interior(self.level0).max())
+        level_array = np.asarray(level)
+        #: The reset level when it is one number (a window can then move: :meth:`shift`).
+        self.uniform_level = float(level_array) if level_array.ndim == 0 else None
+        self._origin0 = self.origin
+        #: Global index of node ``(0, 0)``: 0 until the window moves.
+        self.offset = (0, 0)
+        self.archive: TileArchive | None = None
 
     def _check_level(self, level: float | np.ndarray) -> np.ndarray:
         array = np.asarray(level, dtype=np.float64)
@@ -157,8 +165,53 @@ class SoilGrid:
         """Surface height once unloaded (``level0 - plastic``), ``(nx, ny)`` copy."""
         return self.interior(self.level0) - self.interior(self.plastic)
 
+    def shift(self, di: int, dj: int) -> int:
+        """Move the window by ``(di, dj)`` nodes; returns the change of a node's flat index.
+
+        Nodes leaving the window are kept in :attr:`archive` where they are deformed; nodes
+        entering it come from there or are fresh soil. Shear displacement moves with the nodes
+        that stay (out of the window it is 0: only nodes in contact have any). Needs a uniform
+        reset level (``uniform_level``).
+        """
+        if self.uniform_level is None:
+            raise ValueError("shift() needs a uniform level: expected level to be a float")
+        if self.archive is None:
+            self.archive = TileArchive((self.uniform_level, 0.0))
+        di, dj = int(di), int(dj)
+        rows = [self.interior(self.level0), self.interior(self.plastic)]
+        self.archive.store(rows, self.offset)
+        shear = self.interior(self.shear)
+        kept = shear.copy()
+        shear.fill(0.0)
+        nx, ny = self.shape
+        if abs(di) < nx and abs(dj) < ny:  # new node (i, j) was old node (i + di, j + dj)
+            shear[max(-di, 0) : nx - max(di, 0), max(-dj, 0) : ny - max(dj, 0)] = kept[
+                max(di, 0) : nx + min(di, 0), max(dj, 0) : ny + min(dj, 0)
+            ]
+        self.offset = (self.offset[0] + di, self.offset[1] + dj)
+        self.archive.load(rows, self.offset)
+        self.origin = (
+            self._origin0[0] + self.offset[0] * self.resolution,
+            self._origin0[1] + self.offset[1] * self.resolution,
+        )
+        self.top = float(rows[0].max())
+        return di * self.stride + dj
+
+    @property
+    def center(self) -> tuple[float, float]:
+        """Centre of the window (m)."""
+        half = 0.5 * self.resolution
+        return (
+            self.origin[0] + half * (self.shape[0] - 1),
+            self.origin[1] + half * (self.shape[1] - 1),
+        )
+
     def reset(self) -> None:
-        """Restore the initial levels and clear plastic sinkage and shear, in place."""
+        """Restore the initial levels and clear plastic sinkage and shear, in place (and put a
+        moved window back where it started, forgetting the soil it archived)."""
+        self.offset, self.origin = (0, 0), self._origin0
+        if self.archive is not None:
+            self.archive.clear()
         np.copyto(self.level0, self._reset_level)
         self.plastic.fill(0.0)
         self.shear.fill(0.0)

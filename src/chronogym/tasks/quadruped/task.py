@@ -19,13 +19,20 @@ trunk or a hip touches the ground; truncated by the time limit.
 Physics: ``dt`` = 5 ms, ``k`` = 4 (50 Hz policy), implicitfast integrator, elliptic friction
 cone with ``impratio`` 100: on a 25 deg slope its feet creep ~1 mm in 2 s against ~95 mm with
 the pyramidal cone, for ~1.7x the physics time (``benchmarks/quadruped_physics.py``).
+Terrain: ``"rigid"`` (the floor plane) or ``"soil"``: SCM soil (``chronogym.terrain``, preset
+``soil``, default Chrono's "firm") under the lower legs (calf capsule and foot sphere), in a
+``soil_window`` x ``soil_window`` m window at ``soil_resolution`` that follows the trunk and
+archives the ruts it leaves, so an episode's ruts stay wherever it walks; the floor still holds
+the trunk, hips and thighs. On soil ``dt`` = 2 ms, ``k`` = 10 (``PHYSICS_STEP``); a foot is in
+contact when the soil pushes its leg up with more than 1 N. Observation, action and reward are
+the same on both terrains.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -49,9 +56,20 @@ from chronogym.tasks.quadruped.model import (
     LEG_NAMES,
     go1_xml_path,
 )
+from chronogym.terrain.params import SoilParameters, soil_preset
+
+if TYPE_CHECKING:
+    from chronogym.terrain import MujocoSoil
 
 #: Reward terms in the order of ``RewardWeights``' fields (the task's term vector).
 REWARD_TERMS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RewardWeights))
+#: Ground under the feet: the rigid floor, or SCM soil (``chronogym.terrain``) over it.
+TERRAINS: tuple[str, ...] = ("rigid", "soil")
+#: Default (dt, k) per terrain, 50 Hz policy either way. The soil's force law is explicit
+#: and Chrono's soil stiffness (2e8 Pa/m) on a 20 mm foot needs dt <= 2 ms: at 5 ms the
+#: robot jitters down through the soil (and at 5 ms with a 10x softer soil the rigid policy
+#: fell in 3 of 4 episodes; at 2 ms it kept walking on "firm", as at 1 ms).
+PHYSICS_STEP: dict[str, tuple[float, int]] = {"rigid": (0.005, 4), "soil": (0.002, 10)}
 _TRACKING_SIGMA = 0.25  # (m/s)^2 and (rad/s)^2 of the exponential tracking kernels
 
 
@@ -78,8 +96,8 @@ class Go1VelocityTask(MujocoTask):
     def __init__(
         self,
         *,
-        dt: float = 0.005,
-        k: int = 4,
+        dt: float | None = None,
+        k: int | None = None,
         max_episode_steps: int | None = 1000,
         commands: CommandRanges | None = None,
         rewards: RewardWeights | None = None,
@@ -95,6 +113,10 @@ class Go1VelocityTask(MujocoTask):
         only_positive_rewards: bool = True,
         kp: float | None = 35.0,
         kd: float | None = 0.5,
+        terrain: str = "rigid",
+        soil: SoilParameters | str = "firm",
+        soil_resolution: float = 0.01,
+        soil_window: float = 3.0,
     ) -> None:
         for name, value in (
             ("action_scale", action_scale),
@@ -115,10 +137,15 @@ class Go1VelocityTask(MujocoTask):
             raise ValueError(f"reset_joint_noise={reset_joint_noise!r}: expected in [0, 0.5] rad")
         if not (isinstance(impratio, (int, float)) and math.isfinite(impratio) and impratio >= 1):
             raise ValueError(f"impratio={impratio!r}: expected a float >= 1")
+        if terrain not in TERRAINS:
+            raise ValueError(f"terrain={terrain!r}: expected one of {', '.join(TERRAINS)}")
+        if not (isinstance(soil_window, (int, float)) and 0.5 <= soil_window <= 100):
+            raise ValueError(f"soil_window={soil_window!r}: expected a side length in [0.5, 100] m")
         if cone not in ("pyramidal", "elliptic"):
             raise ValueError(f"cone={cone!r}: expected 'pyramidal' or 'elliptic'")
-        self.dt = dt
-        self.k = k
+        default_dt, default_k = PHYSICS_STEP[terrain]
+        self.dt = default_dt if dt is None else dt
+        self.k = default_k if k is None else k
         self.max_episode_steps = max_episode_steps
         self.commands = commands or CommandRanges()
         self.weights = rewards or RewardWeights()
@@ -134,6 +161,13 @@ class Go1VelocityTask(MujocoTask):
         self.only_positive_rewards = bool(only_positive_rewards)
         self.kp = kp
         self.kd = kd
+        self.terrain = terrain
+        self.soil_params = soil_preset(soil) if isinstance(soil, str) else soil
+        if not isinstance(self.soil_params, SoilParameters):
+            raise ValueError(f"soil={soil!r}: expected a SoilParameters or a preset name")
+        self.soil_resolution = soil_resolution
+        self.soil_window = float(soil_window)
+        self.soil: MujocoSoil | None = None
 
     # --- init ------------------------------------------------------------------------------
 
@@ -165,6 +199,8 @@ class Go1VelocityTask(MujocoTask):
         self._trunk = model.body(BASE_BODY_NAME).id
         self._nominal_trunk_mass = float(model.body_mass[self._trunk])
         self._floor = model.geom("floor").id
+        if self.terrain == "soil":
+            self._add_soil()
         self._foot_geoms = np.array([model.geom(n).id for n in FOOT_GEOM_NAMES])
         # Role of each geom in a contact: 1..4 = foot index + 1, -1 = trunk or hip (fatal), 0 other.
         fatal = {self._trunk} | {model.body(f"{leg}_hip").id for leg in LEG_NAMES}
@@ -192,12 +228,35 @@ class Go1VelocityTask(MujocoTask):
         self._fell = False
         self._base_contact = False
 
+    def _add_soil(self) -> None:
+        """SCM soil under the lower legs (calf capsule + foot sphere), in a window that
+        follows the trunk; the floor still holds the trunk, hips and thighs."""
+        from chronogym.terrain import MujocoSoil
+
+        side = self.soil_window
+        self.soil = MujocoSoil(
+            self.model,
+            self.data,
+            self.soil_params,
+            bodies=[f"{leg}_calf" for leg in LEG_NAMES],
+            extent=(side, side),
+            resolution=self.soil_resolution,
+            follow=BASE_BODY_NAME,
+        )
+        self.soil.exclude_ground(self._floor)
+        calves = [self.model.body(f"{leg}_calf").id for leg in LEG_NAMES]
+        assert self.soil.body_ids.tolist() == calves, "soil rows must follow LEG_NAMES"
+        self._leg_force = self.soil.body_forces  # (4, 6) view, one row per leg (FR, FL, RR, RL)
+        self.advanceables = [self.soil, (self.model, self.data)]
+
     # --- reset -----------------------------------------------------------------------------
 
     def reset(self, rng: np.random.Generator, options: dict[str, Any] | None) -> None:
         options = options or {}
         self._apply_randomization(rng)
         self.reset_data(self._home_key)
+        if self.soil is not None:
+            self.soil.reset()
         data = self.data
         yaw = rng.uniform(-math.pi, math.pi)
         data.qpos[3:7] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
@@ -294,6 +353,8 @@ class Go1VelocityTask(MujocoTask):
                 elif role < 0:
                     base = True
         self._base_contact = base
+        if self.soil is not None:  # the soil carries a leg: its upward force exceeds 1 N
+            feet = (self._leg_force[:, 2] > 1.0).tolist()
         self.feet_contact_now = np.array(feet)
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:

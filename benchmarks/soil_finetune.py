@@ -1,0 +1,148 @@
+"""The paper's transfer experiment: fine-tune a rigid-ground Go1 policy on deformable soil.
+
+Every configuration resumes the same rigid-terrain checkpoint on SCM soil (the Go1 task's
+``terrain="soil"``: Chrono's "firm" soil under the lower legs, 2 ms physics step) with the
+paper's conservative PPO settings (``FINETUNE_PPO``: learning rate 1e-5, clip 0.02, desired KL
+0.001, max grad norm 0.5) for the same wall-clock budget and seed: the serial baseline and Ray
+with n_env in {8, 16}. Writes one CSV per configuration (``progress.csv`` of the run), the
+paper's three panels against wall time (``soil_finetune.png``) and a JSON summary. Then the
+deterministic policy (action mean) of the checkpoint before and of each run after is rolled
+out on soil for a few fixed commands, and the table shows their velocity-tracking errors.
+
+    python benchmarks/soil_finetune.py                    # 3 min per configuration
+    python benchmarks/soil_finetune.py --minutes 20 --checkpoint runs/go1-rigid/latest.pt
+
+Without a rigid checkpoint (``--checkpoint``, default ``runs/go1-rigid/latest.pt``, written by
+``chronogym train quadruped --out runs/go1-rigid``), one is trained first for
+``--rigid-minutes`` (serial, 32 envs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import shutil
+from pathlib import Path
+
+from rl_scaling import parse_config, plot, print_table, read_rows  # this script's folder
+
+DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "soil_finetune"
+DEFAULT_RUNS = Path("runs") / "soil_finetune"  # checkpoints and TensorBoard events
+DEFAULT_CHECKPOINT = Path("runs") / "go1-rigid" / "latest.pt"
+DEFAULT_CONFIGS = ("serial-16", "ray-8", "ray-16")
+SHORT_MINUTES = 3.0
+EVAL_COMMANDS = ((0.5, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.5, 0.0), (0.0, 0.0, 1.0))
+
+
+def rigid_checkpoint(path: Path, minutes: float, seed: int) -> Path:
+    """``path`` if it exists, else a rigid policy trained for ``minutes`` (serial, 32 envs)."""
+    if path.is_file():
+        return path
+    from chronogym.rl.quadruped import train_quadruped
+
+    print(f"== no rigid checkpoint at {path}: training one for {minutes:g} min (serial, 32 envs)")
+    result = train_quadruped(path.parent, num_envs=32, backend="serial", minutes=minutes, seed=seed)
+    return Path(result.checkpoint)
+
+
+def finetune(name: str, checkpoint: Path, minutes: float, out: Path, runs: Path, seed: int):
+    """Fine-tune one configuration on soil; its summary (env steps of this run only)."""
+    from chronogym.rl.quadruped import QUADRUPED_PPO, train_quadruped
+
+    backend, num_envs = parse_config(name)
+    run_dir = runs / name
+    shutil.rmtree(run_dir, ignore_errors=True)  # fresh progress.csv for the figure
+    result = train_quadruped(
+        run_dir, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed,
+        resume=checkpoint, terrain="soil", finetune=True,
+    )  # fmt: skip
+    csv_path = out / f"{name}.csv"
+    shutil.copyfile(result.csv_path, csv_path)
+    rows = read_rows(csv_path)
+    steps = len(rows) * num_envs * QUADRUPED_PPO["num_steps_per_env"]
+    return {
+        "config": name,
+        "backend": backend,
+        "num_envs": num_envs,
+        "iterations": len(rows),
+        "env_steps": steps,
+        "wall_time": result.wall_time,
+        "env_steps_per_s": steps / result.wall_time if result.wall_time else math.nan,
+        "final": rows[-1] if rows else {},
+        "csv": csv_path.name,
+        "checkpoint": str(result.checkpoint),
+    }
+
+
+def evaluate_on_soil(checkpoint: str | Path, episodes: int, seed: int) -> dict[str, float]:
+    """Mean survival and x/y velocity MSE of the deterministic policy over ``EVAL_COMMANDS``."""
+    from chronogym.rl.quadruped import play_quadruped
+
+    rows = play_quadruped(
+        checkpoint, commands=EVAL_COMMANDS, episodes=episodes, seed=seed, terrain="soil",
+        progress=False,
+    )  # fmt: skip
+    mean = {key: sum(row[key] for row in rows) / len(rows) for key in ("survival",)}
+    for key in ("x_vel_mse", "y_vel_mse"):
+        values = [row[key] for row in rows if math.isfinite(row[key])]
+        mean[key] = sum(values) / len(values) if values else math.nan
+    return mean
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=SHORT_MINUTES, help="per configuration")
+    parser.add_argument("--configs", nargs="+", default=list(DEFAULT_CONFIGS))
+    parser.add_argument("--checkpoint", type=Path, default=DEFAULT_CHECKPOINT)
+    parser.add_argument("--rigid-minutes", type=float, default=10.0)
+    parser.add_argument("--eval-episodes", type=int, default=2, help="per command (0: skip)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="CSVs, PNG and JSON")
+    parser.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="checkpoints, events")
+    args = parser.parse_args()
+    for name in args.configs:
+        parse_config(name)
+    if not args.minutes > 0:
+        parser.error(f"--minutes={args.minutes}: expected > 0")
+    args.out.mkdir(parents=True, exist_ok=True)
+    checkpoint = rigid_checkpoint(args.checkpoint, args.rigid_minutes, args.seed)
+    summaries = []
+    for name in args.configs:
+        print(f"== {name}: fine-tune on soil for {args.minutes:g} min from {checkpoint}")
+        summaries.append(finetune(name, checkpoint, args.minutes, args.out, args.runs, args.seed))
+    print_table(summaries)
+    evaluation = {}
+    if args.eval_episodes > 0:
+        print(f"deterministic policy on soil, {args.eval_episodes} episode(s) per command:")
+        print(f"{'policy':>10} {'survival':>8} {'x_mse':>7} {'y_mse':>7}")
+        policies = [("rigid", checkpoint)] + [(s["config"], s["checkpoint"]) for s in summaries]
+        for label, path in policies:
+            evaluation[label] = evaluate_on_soil(path, args.eval_episodes, args.seed)
+            e = evaluation[label]
+            print(f"{label:>10} {e['survival']:8.2f} {e['x_vel_mse']:7.4f} {e['y_vel_mse']:7.4f}")
+    png = args.out / "soil_finetune.png"
+    title = (
+        f"Go1 fine-tuned from rigid ground onto SCM soil (firm), conservative PPO, "
+        f"{args.minutes:g} min per configuration, {os.cpu_count()} CPUs"
+    )
+    plot(summaries, png, title)
+    result = {
+        "benchmark": "soil_finetune",
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+        "minutes_per_config": args.minutes,
+        "seed": args.seed,
+        "rigid_checkpoint": str(checkpoint),
+        "configs": summaries,
+        "evaluation_on_soil": {"commands": EVAL_COMMANDS, "policies": evaluation},
+    }
+    (args.out / "soil_finetune.json").write_text(json.dumps(result, indent=2))
+    print(f"wrote {png} and {args.out / 'soil_finetune.json'}")
+
+
+if __name__ == "__main__":
+    main()
