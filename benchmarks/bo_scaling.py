@@ -13,6 +13,7 @@ is the worst of the final best values of all constant-liar runs, so every run re
     python benchmarks/bo_scaling.py                  # W in {1, 2, 4, 8}, 2 seeds, rigid
     python benchmarks/bo_scaling.py --quick          # smoke run
     python benchmarks/bo_scaling.py --terrain rigid rough --seeds 3 --address auto
+    python benchmarks/bo_scaling.py --terrain soil   # SCM soil: ~2 s a landing (rigid ~0.3 s)
 """
 
 from __future__ import annotations
@@ -60,11 +61,13 @@ class Run:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    from chronogym.optim.lander import TERRAINS
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4, 8])
     parser.add_argument("--trials", type=int, default=48, help="trial budget of every run")
     parser.add_argument("--seeds", type=int, default=2, help="repetitions per level")
-    parser.add_argument("--terrain", nargs="+", default=["rigid"], choices=["rigid", "rough"])
+    parser.add_argument("--terrain", nargs="+", default=["rigid"], choices=list(TERRAINS))
     parser.add_argument("--startup-trials", type=int, default=10)
     parser.add_argument("--skip-liar-check", action="store_true")
     parser.add_argument("--quick", action="store_true", help="smoke run (about a minute)")

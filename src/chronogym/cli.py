@@ -252,6 +252,8 @@ def cmd_envs(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from chronogym.optim.lander import TERRAINS as LANDER_TERRAINS
+
     parser = argparse.ArgumentParser(
         prog="chronogym",
         description="High-fidelity simulations as Gymnasium environments, in parallel on Ray.",
@@ -269,7 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
     opt.add_argument("problem", choices=["lander"])
     opt.add_argument("--workers", type=int, default=2, help="trials evaluated in parallel")
     opt.add_argument("--trials", type=int, default=40, help="finished trials wanted in the study")
-    opt.add_argument("--terrain", default="rigid", choices=["rigid", "rough"])
+    opt.add_argument("--terrain", default="rigid", choices=list(LANDER_TERRAINS))
     opt.add_argument("--storage", default=DEFAULT_STORAGE, help="Optuna storage URL")
     opt.add_argument("--study", default=None, help="study name (default lander-TERRAIN)")
     opt.add_argument("--seed", type=int, default=0)
@@ -286,7 +288,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--minutes", type=float, default=None, help="wall-clock budget")
     tr.add_argument("--out", default="runs/quadruped", help="logs, CSV and checkpoints")
     tr.add_argument("--resume", default=None, help="checkpoint to continue from")
-    tr.add_argument("--terrain", default="rigid", choices=["rigid"])
+    tr.add_argument("--terrain", default="rigid", choices=["rigid", "soil"])
     tr.add_argument("--finetune", action="store_true", help="conservative PPO (paper's transfer)")
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--envs-per-worker", type=int, default=None)
@@ -312,7 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a command to evaluate (repeatable; default: a standard set)",
     )
     play.add_argument("--steps", type=int, default=None, help="episode length in steps")
-    play.add_argument("--terrain", default="rigid", choices=["rigid"])
+    play.add_argument("--terrain", default="rigid", choices=["rigid", "soil"])
     play.add_argument("--seed", type=int, default=0)
     play.set_defaults(func=cmd_play)
     envs = sub.add_parser("envs", help="list registered environment ids")

@@ -129,3 +129,26 @@ def test_play_rejects_a_video_format_it_cannot_write(tmp_path):
     result = run_cli("play", "quadruped", str(checkpoint), "--video", "out.avi", timeout=60)
     assert result.returncode != 0
     assert "--video=out.avi: expected a .mp4, .gif or .png path" in result.stderr
+
+
+def test_finetune_a_rigid_checkpoint_on_soil_and_play_it_there(tmp_path):
+    rigid, soil = tmp_path / "rigid", tmp_path / "soil"
+    first = run_cli(
+        "train", "quadruped", "--num-envs", "2", "--backend", "serial",
+        "--iterations", "1", "--out", str(rigid),
+    )  # fmt: skip
+    assert first.returncode == 0, first.stderr[-3000:]
+    tuned = run_cli(
+        "train", "quadruped", "--terrain", "soil", "--num-envs", "2", "--backend", "serial",
+        "--iterations", "1", "--out", str(soil), "--resume", str(rigid / "latest.pt"),
+        "--finetune",
+    )  # fmt: skip
+    assert tuned.returncode == 0, tuned.stderr[-3000:]
+    assert "soil terrain" in tuned.stdout
+    assert iterations(soil) == [1]  # carries on from the rigid run's count
+    played = run_cli(
+        "play", "quadruped", str(soil / "latest.pt"), "--terrain", "soil", "--steps", "10",
+        "--command", "0.5", "0", "0",
+    )  # fmt: skip
+    assert played.returncode == 0, played.stderr[-3000:]
+    assert played.stdout.strip().splitlines()[1].split()[0] == "(+0.50,"

@@ -12,6 +12,8 @@ LANDER_METRICS = (
     "E_abs",
     "E_init",
     "max_stroke",
+    "E_soil",
+    "max_sinkage",
     "bottomed_out",
     "tipped_over",
     "settled",
@@ -20,20 +22,28 @@ LANDER_METRICS = (
 )
 
 
+#: Soil of the ``soil`` terrain: Chrono's ``"mars"`` preset, whose Bekker-Wong and
+#: Mohr-Coulomb values (Kc 1.4 kPa/m^(n-1), Kphi 820 kPa/m^n, n 1, c 170 Pa, phi 35 deg) are
+#: the classic lunar-regolith ones.  Default design: the pads sink 18 cm (plastic ruts) and the
+#: soil takes 4324 J of the 7568 J released; ``"lete_sand"`` would be nearly rigid (1.1 cm).
+SOIL_PRESET = "mars"
+
+TERRAINS = ("rigid", "rough", "soil")
+
+
 def make_terrain(name: str) -> Any:
-    """Terrain preset by name: ``rigid`` (flat) or ``rough`` (8 deg slope, 12 rocks)."""
+    """Terrain preset by name: ``rigid`` (flat), ``rough`` (8 deg slope, 12 rocks) or ``soil``
+    (flat SCM soil, :data:`SOIL_PRESET`; the lander then steps at ``soil_timestep``)."""
     from chronogym.tasks.lander import Terrain
 
     presets = {
         "rigid": lambda: Terrain(),
         "rough": lambda: Terrain(slope=math.radians(8.0), n_rocks=12),
+        "soil": lambda: Terrain(soil=SOIL_PRESET),
     }
     if name not in presets:
-        raise ValueError(f"terrain={name!r}: expected one of {sorted(presets)}")
+        raise ValueError(f"terrain={name!r}: expected one of {list(TERRAINS)}")
     return presets[name]()
-
-
-TERRAINS = ("rigid", "rough")
 
 
 def suggest_lander_design(trial: Any) -> dict[str, float]:

@@ -1,9 +1,10 @@
 """Planetary-lander design-optimization case study: the physics building blocks.
 
 A six-legged lunar lander (chassis on the scale of Project Chrono's lander demo) touches
-down on rigid terrain; each leg's primary strut crushes an aluminium-honeycomb
-cartridge.  The design vector ``theta = (f_y, beta, alpha2)`` -- honeycomb yield force,
-leg spread angle, primary strut inclination -- is scored by
+down on rigid terrain or on SCM soil (``Terrain(soil=...)``); each leg's primary strut
+crushes an aluminium-honeycomb cartridge.  The design vector ``theta = (f_y, beta,
+alpha2)`` -- honeycomb yield force, leg spread angle, primary strut inclination -- is
+scored by
 
     J(theta) = a_max / a_ref + (alpha * (E_abs / E_init - 1))**2
 
@@ -15,11 +16,13 @@ Modules:
 * :mod:`~chronogym.tasks.lander.design` -- :class:`LanderDesign`, :data:`DESIGN_BOUNDS`,
   :class:`LanderParams` (every fixed parameter, documented);
 * :mod:`~chronogym.tasks.lander.absorber` -- :class:`HoneycombAbsorber`, the crush law;
-* :mod:`~chronogym.tasks.lander.model` -- the ``MjSpec`` model builder and its topology;
+* :mod:`~chronogym.tasks.lander.model` -- the ``MjSpec`` model builder and its topology,
+  :class:`Terrain` (rigid plane, slope, rocks or soil) and :func:`terrain_params`;
 * :mod:`~chronogym.tasks.lander.sim` -- :class:`LanderSim` and :func:`simulate_landing`
   (metrics, and the energy ledger whose terms are :data:`LEDGER_TERMS`).
 
-MuJoCo only: no Gymnasium, Ray or Optuna import here.
+MuJoCo only (and ``chronogym.terrain``, numba, on soil): no Gymnasium, Ray or Optuna
+import here.
 """
 
 from chronogym.tasks.lander.absorber import HoneycombAbsorber
@@ -37,6 +40,7 @@ from chronogym.tasks.lander.model import (
     build_lander_model,
     build_lander_spec,
     leg_azimuths,
+    terrain_params,
 )
 from chronogym.tasks.lander.sim import LEDGER_TERMS, LanderSim, simulate_landing
 
@@ -56,4 +60,5 @@ __all__ = [
     "build_lander_spec",
     "leg_azimuths",
     "simulate_landing",
+    "terrain_params",
 ]

@@ -60,6 +60,12 @@ Metrics (returned by :meth:`LanderSim.metrics` / :func:`simulate_landing`)
 ``E_abs`` [J]
     Energy dissipated by the six absorbers (plastic crush work + elastic-line damping),
     summed over legs; ``E_abs_legs`` per leg.
+``E_soil`` [J]
+    Work taken by the SCM soil (``Terrain.soil``; 0 on rigid ground): its own account,
+    ``MujocoSoil.energy_dissipated`` (pressing the ruts plastically, shear, damping).
+``max_sinkage`` [m]
+    Deepest permanent (plastic) sinkage of the soil, i.e. the deepest pad rut (0 on rigid
+    ground).
 ``E_init`` [J]
     ``M g h`` as above.
 ``E_available`` [J]
@@ -119,7 +125,13 @@ penetration of a soft constraint):
   (the rest: the law is applied explicitly, once per tick, so the work the mechanism
   delivers and the law's own account of it differ slightly -- -5 J at the default
   design, at most 13 J, 0.2 % of ``E_init``, over the designs in the tests);
-* ``joint_damping``: the passive joint damping.
+* ``joint_damping``: the passive joint damping;
+* ``soil``: on SCM soil, the soil wrench (``data.xfrc_applied`` of the pads and the
+  chassis, mapped to joint space with ``mj_applyFT``) times the mid-tick velocity.  Like
+  the absorbers it splits into ``soil_dissipated`` (the soil's own trapezoidal account
+  ``MujocoSoil.energy_dissipated`` less what is still stored), ``soil_elastic``
+  (``MujocoSoil.elastic_energy``, under the resting pads) and ``soil_coupling`` (the rest:
+  the two accounts use different velocities); all 0 on rigid ground.
 
 ``residual = E_total(0) - (E_total(t) + sum of the terms)``; ``residual_rel`` is it over
 ``E_init``, ``residual_max`` its largest magnitude over every tick of the landing.
@@ -147,14 +159,23 @@ The ledger costs about 14 us per tick (~14 % of a landing).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
 
 from chronogym.tasks.lander.absorber import HoneycombAbsorber
 from chronogym.tasks.lander.design import DEFAULT_DESIGN, LanderDesign, LanderParams
-from chronogym.tasks.lander.model import N_LEGS, LanderModelInfo, Terrain, build_lander_model
+from chronogym.tasks.lander.model import (
+    N_LEGS,
+    LanderModelInfo,
+    Terrain,
+    build_lander_model,
+    terrain_params,
+)
+
+if TYPE_CHECKING:
+    from chronogym.terrain import MujocoSoil
 
 __all__ = ["LEDGER_TERMS", "LanderSim", "simulate_landing"]
 
@@ -169,10 +190,12 @@ LEDGER_TERMS: tuple[str, ...] = (
     "joint_friction",  # dof/tendon frictionloss rows (none in this model)
     "absorbers",  # honeycomb force x stroke rate, at the six slide joints
     "joint_damping",  # passive joint damping (hinges, ball joints)
+    "soil",  # SCM soil wrench on the pads and the chassis (0 on rigid ground)
 )
 _N_EFC_TERMS = 5  # the first five terms are booked from constraint rows
 _ABSORBERS = LEDGER_TERMS.index("absorbers")
 _DAMPING = LEDGER_TERMS.index("joint_damping")
+_SOIL = LEDGER_TERMS.index("soil")
 _NORMAL = LEDGER_TERMS.index("contact_normal")
 _C = mujoco.mjtConstraint
 #: ledger term of each constraint row type (index: ``mjtConstraint`` value).  Pyramidal
@@ -198,7 +221,9 @@ class LanderSim:
     Args:
         design: the design vector.
         params: fixed parameters (default :class:`LanderParams`).
-        terrain: ground (default flat).
+        terrain: ground (default flat, rigid).  With ``terrain.soil`` the pads and the
+            chassis stand on SCM soil (``soil``), stepped before each ``mj_step``, and the
+            time step is ``params.soil_timestep`` (``self.params`` holds the one used).
         seed: places the rocks of ``terrain``; the simulation itself is deterministic.
     """
 
@@ -209,13 +234,14 @@ class LanderSim:
         terrain: Terrain | None = None,
         seed: int = 0,
     ) -> None:
-        self.params = params if params is not None else LanderParams()
         self.terrain = terrain if terrain is not None else Terrain()
+        self.params = terrain_params(params if params is not None else LanderParams(), self.terrain)
         self.seed = int(seed)
         self.design = design
         self.info: LanderModelInfo = build_lander_model(design, self.params, self.terrain, seed)
         self.model = self.info.model
         self.data = mujoco.MjData(self.model)
+        self.soil = self._make_soil()
         p = self.params
         self.absorber = HoneycombAbsorber(
             N_LEGS,
@@ -235,8 +261,8 @@ class LanderSim:
     def reset(self, design: LanderDesign | None = None, *, seed: int | None = None) -> None:
         """Back to the touchdown state; optionally with another design or rock seed.
 
-        A design that changes only ``f_y`` keeps the compiled model; a new ``beta`` or
-        ``alpha2`` (or seed with rocks) rebuilds it.
+        A design that changes only ``f_y`` keeps the compiled model (and the soil, restored
+        in place); a new ``beta`` or ``alpha2`` (or seed with rocks) rebuilds both.
         """
         p = self.params
         rebuild = False
@@ -250,6 +276,7 @@ class LanderSim:
             self.info = build_lander_model(self.design, p, self.terrain, self.seed)
             self.model = self.info.model
             self.data = mujoco.MjData(self.model)
+            self.soil = self._make_soil()
             self._scratch = None
         self.info.design = self.design
         self.absorber.set_properties(self.design.f_y, p.absorber_damping(self.design.f_y))
@@ -257,6 +284,8 @@ class LanderSim:
 
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
+        if self.soil is not None:
+            self.soil.reset()
         d.qvel[0] = p.horizontal_speed
         d.qvel[2] = -p.touchdown_speed
         mujoco.mj_forward(m, d)
@@ -281,8 +310,44 @@ class LanderSim:
         self._qvel0 = np.zeros(m.nv)
         self._vmid = np.zeros(m.nv)
         self._work = np.zeros(len(LEDGER_TERMS))
+        self._qfrc_soil = np.zeros(m.nv)
         self._energy0 = (float(d.energy[0]), float(d.energy[1]))  # (potential, kinetic)
         self._residual_max = 0.0
+
+    def _make_soil(self) -> MujocoSoil | None:
+        """The terrain's SCM soil on this model (``None`` on rigid ground), holding the pads
+        and the chassis; the ground plane no longer touches them."""
+        terrain = self.terrain
+        if terrain.soil is None:
+            return None
+        from chronogym.terrain import MujocoSoil
+
+        self._check_pads_on_soil()
+        bodies = ["chassis", *(f"pad_{i}" for i in range(N_LEGS))]
+        side = float(terrain.soil_extent)
+        soil = MujocoSoil(
+            self.model,
+            self.data,
+            terrain.soil,
+            bodies=bodies,
+            extent=(side, side),
+            resolution=float(terrain.soil_resolution),
+        )
+        soil.exclude_ground("ground")
+        return soil
+
+    def _check_pads_on_soil(self) -> None:
+        """Raise if a pad's rim starts less than 0.2 m inside the soil patch."""
+        start = mujoco.MjData(self.model)  # at qpos0: the touchdown pose
+        mujoco.mj_kinematics(self.model, start)
+        pads = start.geom_xpos[self.info.pad_geoms, :2]
+        reach = float(np.max(np.abs(pads))) + self.params.pad_radius
+        half = 0.5 * self.terrain.soil_extent
+        if reach > half - 0.2:
+            raise ValueError(
+                f"soil_extent={self.terrain.soil_extent!r}: a pad reaches {reach:.3f} m from "
+                f"the centre; expected a patch wider than {2 * (reach + 0.2):.3f} m"
+            )
 
     # --- stepping ----------------------------------------------------------------------------
     @property
@@ -295,9 +360,12 @@ class LanderSim:
         return self.data.qpos[self._sq].copy()
 
     def step(self) -> None:
-        """One physics tick: absorber forces at the slide DOFs, ``mj_step``, then the
-        energy ledger's work over the tick."""
+        """One physics tick: the soil wrench (on soil), absorber forces at the slide DOFs,
+        ``mj_step``, then the energy ledger's work over the tick."""
         d = self.data
+        soil = self.soil
+        if soil is not None:
+            soil.Advance(self.model.opt.timestep)
         self._qvel0[:] = d.qvel
         force = self.absorber.update(d.qpos[self._sq], d.qvel[self._sd])
         d.qfrc_applied[self._sd] = -force
@@ -308,8 +376,13 @@ class LanderSim:
             self._vel[n] = d.qvel[0:3]
             self._tilt_cos[n] = self._cos_tilt()
             self._n = n
-        if self._t_touchdown is None and d.ncon > 0:
+        if self._t_touchdown is None and (d.ncon > 0 or self._on_soil()):
             self._t_touchdown = float(d.time)
+
+    def _on_soil(self) -> bool:
+        """Did the soil push on a body during the tick just taken?"""
+        soil = self.soil
+        return soil is not None and bool(self.data.xfrc_applied[soil.body_ids].any())
 
     def _book_work(self, force: np.ndarray) -> None:
         """Add the work of every non-conservative force over the tick just taken.
@@ -346,6 +419,23 @@ class LanderSim:
                 first = d.contact.efc_address[: d.ncon]
                 term[first[first >= 0]] = _NORMAL
             work[:_N_EFC_TERMS] -= dt * np.bincount(term, power, _N_EFC_TERMS)
+        if self.soil is not None:
+            work[_SOIL] -= dt * float(self._soil_force() @ vmid)
+
+    def _soil_force(self) -> np.ndarray:
+        """Joint-space force of the soil wrench applied over the tick just taken.
+
+        After ``mj_step`` the kinematics (``xipos``, Jacobians) still describe the tick's
+        start state, where the soil computed its wrench about each body's CoM.
+        """
+        m, d = self.model, self.data
+        qfrc = self._qfrc_soil
+        qfrc[:] = 0.0
+        xfrc, bodies = d.xfrc_applied, self.soil.body_ids
+        for body in bodies[xfrc[bodies].any(axis=1)].tolist():
+            wrench = xfrc[body]
+            mujoco.mj_applyFT(m, d, wrench[:3], wrench[3:], d.xipos[body], body, qfrc)
+        return qfrc
 
     def _cos_tilt(self) -> float:
         """Cosine of the angle between the chassis axis and the ground-plane normal."""
@@ -419,6 +509,7 @@ class LanderSim:
         e_abs = float(np.sum(ab.absorbed_energy))
         elastic = float(np.sum(ab.elastic_energy))
         e_init = self.params.e_init
+        soil_taken, soil_elastic = self._soil_energies()
         return {
             "E_init": e_init,
             "KE_0": kin0,
@@ -428,11 +519,26 @@ class LanderSim:
             "absorbers_dissipated": e_abs,
             "absorbers_elastic": elastic,
             "absorbers_coupling": work["absorbers"] - e_abs - elastic,
+            "soil_dissipated": soil_taken - soil_elastic,
+            "soil_elastic": soil_elastic,
+            "soil_coupling": work["soil"] - soil_taken,
             "KE": kin,
             "residual": residual,
             "residual_rel": residual / e_init,
             "residual_max": max(self._residual_max, abs(residual)),
         }
+
+    def _soil_energies(self) -> tuple[float, float]:
+        """(work taken by the soil by its own account, elastic energy stored in it) [J]."""
+        if self.soil is None:
+            return 0.0, 0.0
+        return self.soil.energy_dissipated, self.soil.elastic_energy
+
+    def _max_sinkage(self) -> float:
+        """Deepest plastic sinkage of the soil [m] (0 on rigid ground)."""
+        if self.soil is None:
+            return 0.0
+        return float(np.max(self.soil.plastic_sinkage))
 
     def metrics(self) -> dict[str, Any]:
         """Touchdown metrics so far (see the module docstring)."""
@@ -457,6 +563,8 @@ class LanderSim:
             "E_abs": e_abs,
             "E_abs_legs": ab.absorbed_energy.copy(),
             "E_init": e_init,
+            "E_soil": energy["soil_dissipated"] + energy["soil_elastic"],
+            "max_sinkage": self._max_sinkage(),
             "E_available": energy["E_in"],
             "KE_0": self._ke0,
             "max_stroke": float(np.max(ab.max_stroke_reached)),
