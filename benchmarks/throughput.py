@@ -7,6 +7,7 @@ Prints an aligned table and writes JSON (default ``benchmarks/results/throughput
 
     python benchmarks/throughput.py            # default sweep, < 4 min on 2 cores
     python benchmarks/throughput.py --quick    # smoke run, < 1 min
+    python benchmarks/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
 
 Counting: ``steps/s`` counts env steps as Gymnasium does, including the autoreset
 steps of NEXT_STEP mode, which run no physics. With random actions the pole falls
@@ -14,6 +15,11 @@ within a step or two once ``k`` is large, so up to half of all steps are such re
 ``sim-steps/s`` counts only the env steps that ran physics; the AsyncVectorEnv ratio
 and the parallel efficiency use it, so they compare like with like and against the
 raw single-env rate (``k`` ticks + observe per step).
+
+``--async-k`` adds ``ray-async`` rows: the same Ray shapes (two workers or more)
+driven by ``send`` / ``recv(min_envs=N/2)``, each answered worker sent its next
+actions at once, against the barrier ``step`` of the ``ray`` rows. Their
+``µs/vstep`` is per ``recv``, which returns about N/2 envs.
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ from chronogym.tasks.cartpole import CartPoleTask
 ENV_ID = "chronogym/CartPole-v0"
 DT = 0.002
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "throughput.json"
-VECTOR_BACKENDS = ("serial", "async", "ray")
+VECTOR_BACKENDS = ("serial", "async", "ray", "ray-async")
 RAW_MIN_SECONDS = 0.5  # shortest timing of the raw loop
 RAY_SETTLE_S = 2.0  # let a fresh Ray cluster's processes finish starting before timing
 
@@ -60,11 +66,12 @@ class CostLevel:
 class Config:
     """One measured configuration."""
 
-    backend: str  # raw | simenv | serial | async | ray
+    backend: str  # raw | simenv | serial | async | ray | ray-async
     num_envs: int
     workers: int  # processes stepping envs (1 for raw, simenv, serial)
     envs_per_worker: int
     level: CostLevel
+    min_envs: int = 0  # ray-async: recv(min_envs=...); 0 for the others
 
 
 @dataclass
@@ -74,7 +81,7 @@ class Result:
     config: Config
     env_steps: int  # as Gymnasium counts them (autoreset steps included)
     sim_steps: int  # env steps that ran physics
-    calls: int  # vector steps (or single-env steps)
+    calls: int  # vector steps (recv calls for ray-async; single-env steps for raw, simenv)
     seconds: float
     setup_s: float
     derived: dict[str, float | None] = field(default_factory=dict)
@@ -118,6 +125,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=int,
         default=8,
         help="num_envs of the extra RayVectorEnv point with one env per worker (0: none)",
+    )
+    parser.add_argument(
+        "--async-k",
+        action="store_true",
+        help="also time RayVectorEnv send/recv with min_envs = N/2 (shapes with >= 2 workers)",
     )
     parser.add_argument("--warmup", type=int, default=5, help="untimed vector steps per config")
     parser.add_argument("--seed", type=int, default=0, help="seed of envs and random actions")
@@ -237,7 +249,7 @@ def make_vector_env(config: Config) -> gym.vector.VectorEnv:
         return chronogym.SerialVectorEnv(ENV_ID, config.num_envs, env_kwargs=env_kwargs)
     if config.backend == "async":
         return gym.make_vec(ENV_ID, config.num_envs, vectorization_mode="async", **env_kwargs)
-    if config.backend == "ray":
+    if config.backend in ("ray", "ray-async"):
         return chronogym.RayVectorEnv(
             ENV_ID,
             config.num_envs,
@@ -274,16 +286,58 @@ def time_vector_env(
             return calls, sim_steps, elapsed
 
 
+def recv_and_send(
+    env: Any, min_envs: int, rng: np.random.Generator, done: np.ndarray
+) -> tuple[int, int]:
+    """One ``recv(min_envs)``, then send the answered envs random actions.
+
+    Returns (envs received, envs among them that ran physics); updates ``done``.
+    """
+    _, _, terminated, truncated, _, ids = env.recv(min_envs=min_envs)
+    ran = int(len(ids) - done[ids].sum())
+    done[ids] = np.logical_or(terminated, truncated)
+    env.send(rng.uniform(-1.0, 1.0, size=(len(ids), 1)).astype(np.float32), ids)
+    return len(ids), ran
+
+
+def time_async_env(
+    env: Any, min_envs: int, seconds: float, warmup: int, seed: int
+) -> tuple[int, int, int, float]:
+    """Like time_vector_env with send/recv; returns (recvs, env steps, sim steps, seconds)."""
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    done = np.zeros(env.num_envs, dtype=np.bool_)
+    env.send(rng.uniform(-1.0, 1.0, size=(env.num_envs, 1)).astype(np.float32))
+    for _ in range(warmup * 2):
+        recv_and_send(env, min_envs, rng, done)
+    calls, steps, sim_steps, start = 0, 0, 0, time.perf_counter()
+    try:
+        while True:
+            got, ran = recv_and_send(env, min_envs, rng, done)
+            calls, steps, sim_steps = calls + 1, steps + got, sim_steps + ran
+            elapsed = time.perf_counter() - start
+            if elapsed >= seconds and calls >= 3:
+                return calls, steps, sim_steps, elapsed
+    finally:
+        env.recv()  # drain what is still in flight
+
+
 def run_vector(config: Config, seconds: float, warmup: int, seed: int) -> Result:
     """Build, warm up, time and close one vector env."""
     start = time.perf_counter()
     env = make_vector_env(config)
     setup_s = time.perf_counter() - start
     try:
-        calls, sim_steps, elapsed = time_vector_env(env, seconds, warmup, seed)
+        if config.min_envs:
+            calls, steps, sim_steps, elapsed = time_async_env(
+                env, config.min_envs, seconds, warmup, seed
+            )
+        else:
+            calls, sim_steps, elapsed = time_vector_env(env, seconds, warmup, seed)
+            steps = calls * config.num_envs
     finally:
         env.close()
-    return Result(config, calls * config.num_envs, sim_steps, calls, elapsed, setup_s)
+    return Result(config, steps, sim_steps, calls, elapsed, setup_s)
 
 
 def run_single(config: Config, seconds: float, seed: int) -> Result:
@@ -317,14 +371,18 @@ def ray_shapes(num_envs: int, one_per_worker: int) -> list[tuple[int, int]]:
     return list(dict.fromkeys(shapes))
 
 
-def vector_configs(level: CostLevel, num_envs: int, one_per_worker: int) -> list[Config]:
-    """Serial, Async and the Ray sweep at one cost level and one num_envs."""
+def vector_configs(
+    level: CostLevel, num_envs: int, one_per_worker: int, async_k: bool = False
+) -> list[Config]:
+    """Serial, Async and the Ray sweep (with ``async_k``: send/recv too) at one level and N."""
     configs = [
         Config("serial", num_envs, 1, num_envs, level),
         Config("async", num_envs, num_envs, 1, level),
     ]
     for workers, per in ray_shapes(num_envs, one_per_worker):
         configs.append(Config("ray", num_envs, workers, per, level))
+        if async_k and workers >= 2:
+            configs.append(Config("ray-async", num_envs, workers, per, level, num_envs // 2))
     return configs
 
 
@@ -334,7 +392,7 @@ def build_plan(levels: list[CostLevel], args: argparse.Namespace) -> list[Config
     for level in levels:
         plan += [Config("raw", 1, 1, 1, level), Config("simenv", 1, 1, 1, level)]
         for num_envs in args.num_envs:
-            plan += vector_configs(level, num_envs, args.one_per_worker)
+            plan += vector_configs(level, num_envs, args.one_per_worker, args.async_k)
     return plan
 
 
@@ -365,7 +423,7 @@ def derive(results: list[Result], cpus: int) -> None:
 
 COLUMNS = (  # header, width, format
     ("phys/step", 10, "{:.0f}µs"),
-    ("backend", 7, "{}"),
+    ("backend", 9, "{}"),
     ("N", 3, "{}"),
     ("wrk", 3, "{}"),
     ("e/w", 3, "{}"),
@@ -429,6 +487,11 @@ def notes(cpus: int, tick_us: float, results: list[Result]) -> str:
             "eff = sim-steps/s / (workers x raw single-env rate); eff/cpu uses min(workers, "
             "CPUs) instead; wrk = Ray workers, Async processes, 1 for serial.",
             "phys/call = envs per worker x physics per env step (what one remote call carries).",
+            *(
+                ["ray-async = send / recv(min_envs=N/2) (µs/vstep: per recv) vs ray's barrier."]
+                if any(r.config.min_envs for r in results)
+                else []
+            ),
             f"NOTE: this machine has {cpus} CPU(s). More than {cpus} busy processes (Async with "
             f"N > {cpus}, Ray with more than {cpus} workers, plus the driver) oversubscribe the "
             "cores: their eff is bounded by CPUs / workers, and all numbers are noisy when the "
@@ -475,6 +538,7 @@ def result_record(r: Result) -> dict[str, Any]:
         "num_envs": c.num_envs,
         "workers": c.workers,
         "envs_per_worker": c.envs_per_worker,
+        "min_envs": c.min_envs or None,
         "k": c.level.k,
         "target_us": c.level.target_us,
         "env_steps": r.env_steps,

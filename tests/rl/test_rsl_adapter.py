@@ -239,6 +239,32 @@ def test_train_serial_resume_and_policy(tmp_path, capsys):
         load_policy(second.checkpoint, 5, 1)
 
 
+class _OpensAFile:
+    """Unpickling this opens (creates) a file: what a hostile checkpoint could do."""
+
+    def __init__(self, path) -> None:
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def test_resume_and_load_policy_never_unpickle(tmp_path):
+    marker = tmp_path / "unpickled"
+    hostile = tmp_path / "hostile.pt"
+    torch.save({"actor_state_dict": {}, "iter": 0, "infos": _OpensAFile(marker)}, hostile)
+    env = RslRlVecEnv(serial(), seed=0)
+    try:
+        with pytest.raises(ValueError, match="hostile.pt'.*expected a chronogym/RSL-RL checkpoint"):
+            train(env, tmp_path / "run", iterations=1, resume=hostile, train_cfg=tiny_cfg(),
+                  progress=False)  # fmt: skip
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="checkpoint=.*hostile.pt'.*expected"):
+        load_policy(hostile, 4, 1)
+    assert not marker.exists()
+
+
 def test_train_stops_on_minutes(tmp_path):
     env = RslRlVecEnv(serial(), seed=0)
     try:

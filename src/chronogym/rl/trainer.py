@@ -193,7 +193,7 @@ def train(
 
     start_it, env_steps = 0, 0
     if resume is not None:
-        infos = runner.load(str(resume), map_location="cpu") or {}
+        infos = _load_checkpoint(runner, resume)
         start_it = int(infos.get("iterations_done", runner.current_learning_iteration + 1))
         env_steps = int(infos.get("env_steps", 0))
         configured_lr = cfg["algorithm"].get("learning_rate")
@@ -331,6 +331,32 @@ def train(
     )
 
 
+def _read_checkpoint(path: str | Path, name: str) -> dict[str, Any]:
+    """A checkpoint's dict, read with ``weights_only=True``: never unpickles objects."""
+    import torch
+
+    try:
+        saved = torch.load(str(path), map_location="cpu", weights_only=True)
+    except Exception as error:  # an arbitrary pickle, or not a checkpoint at all
+        first_line = (str(error).splitlines() or [""])[0][:200]
+        raise ValueError(
+            f"{name}={str(path)!r}: expected a chronogym/RSL-RL checkpoint of tensors and plain "
+            f"data ({type(error).__name__}: {first_line})"
+        ) from error
+    if not isinstance(saved, dict):
+        raise ValueError(f"{name}={str(path)!r}: expected a checkpoint dict, got {type(saved)}")
+    return saved
+
+
+def _load_checkpoint(runner: Any, path: str | Path) -> dict[str, Any]:
+    """``runner.load`` without unpickling: tensors, numbers, strings and containers only
+    (``weights_only=True``; RSL-RL's own loader unpickles whatever the file holds)."""
+    saved = _read_checkpoint(path, "resume")
+    if runner.alg.load(saved, None, True):
+        runner.current_learning_iteration = saved["iter"]
+    return saved.get("infos") or {}
+
+
 def load_policy(
     checkpoint: str | Path,
     obs_dim: int | None = None,
@@ -357,7 +383,7 @@ def load_policy(
 
     if torch_threads is not None:
         torch.set_num_threads(torch_threads)
-    saved = torch.load(str(checkpoint), map_location="cpu", weights_only=True)  # no unpickling
+    saved = _read_checkpoint(checkpoint, "checkpoint")  # no unpickling
     infos = saved.get("infos") or {}
     cfg = train_cfg or infos.get("train_cfg") or ppo_train_config()
     state = saved["actor_state_dict"]

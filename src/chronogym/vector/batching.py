@@ -31,3 +31,14 @@ def concat_batches(space: spaces.Space, parts: list[Any]) -> Any:
     if isinstance(space, (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)):
         return np.concatenate(parts, axis=0)
     return tuple(item for part in parts for item in part)
+
+
+def take_rows(batch: Any, rows: np.ndarray) -> Any:
+    """Rows ``rows`` (in that order) of a batched structure (array, dict or tuple of arrays)."""
+    if isinstance(batch, dict):
+        return {key: take_rows(value, rows) for key, value in batch.items()}
+    if isinstance(batch, tuple):
+        return tuple(take_rows(value, rows) for value in batch)
+    if isinstance(batch, np.ndarray):
+        return batch[rows]
+    return [batch[int(i)] for i in rows]

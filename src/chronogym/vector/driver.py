@@ -6,11 +6,16 @@ results. Each worker is an :class:`~chronogym.vector.group.EnvGroup` holding
 ``envs_per_worker`` environments. A worker that dies (or whose call fails) is
 replaced: its environments are rebuilt, get fresh deterministic seeds, and are
 reported as truncated with ``info["worker_restarted"] = True``.
+
+Besides that barrier, ``send`` / ``recv`` step subsets of whole workers without
+one (EnvPool-style), and ``step_async`` / ``step_wait`` split a full step the
+way Gymnasium's ``AsyncVectorEnv`` does; see :mod:`chronogym.vector.pending`.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -18,14 +23,23 @@ from typing import Any, Protocol
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import NoAsyncCallError
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from chronogym.actions import check_invalid_action_mode, prepare_action
 from chronogym.errors import WorkerCallError, WorkerCrashLoopError
 from chronogym.seeding import restart_seed, vector_seeds
-from chronogym.vector.batching import concat_batches, slice_batch
+from chronogym.vector.batching import concat_batches, slice_batch, take_rows
 from chronogym.vector.group import DisabledAutoresetError, EnvFactory, Restart
+from chronogym.vector.pending import (
+    EnvsInFlightError,
+    PendingCall,
+    RecvTimeoutError,
+    batch_infos,
+    check_env_ids,
+    workers_of,
+)
 
 logger = logging.getLogger("chronogym")
 
@@ -40,6 +54,17 @@ class Outcome:
     lost: bool = False  # the worker process is gone or stopped answering
 
 
+@dataclass
+class StepPart:
+    """One worker's share of a step (or of an asynchronous reset)."""
+
+    obs: Any
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    infos: list[dict[str, Any]]
+
+
 class Backend(Protocol):
     """Where EnvGroups live: in this process, or in Ray actors."""
 
@@ -47,6 +72,7 @@ class Backend(Protocol):
     def replace(self, worker: int, kwargs: dict[str, Any]) -> None: ...
     def submit(self, worker: int, method: str, *args: Any) -> Any: ...
     def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]: ...
+    def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]: ...
     def pid(self, worker: int) -> int: ...
     def shutdown(self) -> None: ...
 
@@ -140,6 +166,7 @@ class WorkerVectorEnv(VectorEnv):
         self.metadata = {**metadata, "autoreset_mode": self.autoreset_mode}
         self.render_mode = render_mode
         self._last_parts: list[Any] = [None] * self.num_workers
+        self._pending: dict[int, PendingCall] = {}  # worker -> its call in flight
         self._packed = isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
 
     # -- workers -----------------------------------------------------------------------
@@ -218,14 +245,8 @@ class WorkerVectorEnv(VectorEnv):
         options: dict[str, Any] | None = None,
     ) -> tuple[Any, dict[str, Any]]:
         self._check_open()
-        seeds = vector_seeds(seed, self.num_envs)
-        mask = None
-        if options is not None and "reset_mask" in options:
-            options = dict(options)
-            mask = _check_reset_mask(options.pop("reset_mask"), self.num_envs)
-        for i, s in enumerate(seeds):
-            if s is not None and (mask is None or mask[i]):
-                self._seed_roots[i] = s
+        self._check_idle("reset")
+        seeds, options, mask = self._prepare_reset(seed, options)
         workers = [
             w for w, (lo, hi) in enumerate(self._slices) if mask is None or mask[lo:hi].any()
         ]
@@ -237,17 +258,34 @@ class WorkerVectorEnv(VectorEnv):
             failed = []
             for w, outcome in zip(pending, outcomes, strict=True):
                 if outcome.ok:
-                    part, infos, restarts = outcome.value
-                    self._note_restarts(restarts)
-                    self._last_parts[w] = part
-                    lo, _ = self._slices[w]
-                    for j, info in enumerate(infos):
-                        infos_per_env[lo + j] = info
+                    lo, hi = self._slices[w]
+                    infos_per_env[lo:hi] = self._take_reset(w, outcome.value)
                 else:
                     self._replace_worker(w, outcome.error)
                     failed.append(w)
             pending = failed
         return self._join_obs(), self._join_infos(infos_per_env)
+
+    def _prepare_reset(
+        self, seed: int | list[int | None] | None, options: dict[str, Any] | None
+    ) -> tuple[list[int | None], dict[str, Any] | None, np.ndarray | None]:
+        """Per-env seeds, options without ``reset_mask``, and the mask; record seed roots."""
+        seeds = vector_seeds(seed, self.num_envs)
+        mask = None
+        if options is not None and "reset_mask" in options:
+            options = dict(options)
+            mask = _check_reset_mask(options.pop("reset_mask"), self.num_envs)
+        for i, s in enumerate(seeds):
+            if s is not None and (mask is None or mask[i]):
+                self._seed_roots[i] = s
+        return seeds, options, mask
+
+    def _take_reset(self, w: int, value: tuple) -> list[dict[str, Any]]:
+        """Keep worker ``w``'s reset observations; return its envs' infos."""
+        part, infos, restarts = value
+        self._note_restarts(restarts)
+        self._last_parts[w] = part
+        return list(infos)
 
     def _reset_args(self, w: int, seeds: list, options: Any, mask: np.ndarray | None) -> tuple:
         lo, hi = self._slices[w]
@@ -255,48 +293,54 @@ class WorkerVectorEnv(VectorEnv):
 
     # -- step --------------------------------------------------------------------------
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
+        """Step every env with one barrier (the synchronous path)."""
         self._check_open()
+        self._check_idle("step")
         if self._last_parts[0] is None:
             raise RuntimeError("step() called before reset(); call reset() first")
         actions = prepare_action(
             actions, self.single_action_space, self.num_envs, self.invalid_action
         )
         workers = list(range(self.num_workers))
+        outcomes = self._call_all(workers, self._step_method, self._step_args(workers, actions))
+        results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
+        return self._join_results(workers, results)[:5]
+
+    @property
+    def _step_method(self) -> str:
+        return "step_packed" if self._packed else "step"
+
+    def _step_args(self, workers: list[int], actions: Any) -> list[tuple[Any, ...]]:
+        """One argument tuple per worker from ``actions``: the rows of those workers' envs."""
+        offsets, start = [], 0
+        for w in workers:
+            lo, hi = self._slices[w]
+            offsets.append((start, start + hi - lo))
+            start += hi - lo
         if self._packed:
             data = actions.tobytes()
-            row = len(data) // self.num_envs
-            args = [(data[lo * row : hi * row],) for lo, hi in self._slices]
-            outcomes = self._call_all(workers, "step_packed", args)
+            row = len(data) // start
+            return [(data[a * row : b * row],) for a, b in offsets]
+        return [(slice_batch(actions, a, b),) for a, b in offsets]
+
+    def _step_result(self, w: int, outcome: Outcome) -> StepPart:
+        """Worker ``w``'s part of a step; a failed worker is replaced and reported truncated."""
+        lo, hi = self._slices[w]
+        count = hi - lo
+        if outcome.ok:
+            part, rew, term, trunc, infos, restarts = outcome.value
+            if self._packed:
+                part, rew, term, trunc = self._unpack(part, rew, term, trunc, count)
+                infos = infos or [{}] * count
+            self._note_restarts(restarts or [])
         else:
-            args = [(slice_batch(actions, lo, hi),) for lo, hi in self._slices]
-            outcomes = self._call_all(workers, "step", args)
-        rewards = np.zeros(self.num_envs, dtype=np.float64)
-        terminations = np.zeros(self.num_envs, dtype=np.bool_)
-        truncations = np.zeros(self.num_envs, dtype=np.bool_)
-        infos_per_env: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for w, outcome in enumerate(outcomes):
-            lo, hi = self._slices[w]
-            if outcome.ok:
-                part, rew, term, trunc, infos, restarts = outcome.value
-                if self._packed:
-                    part, rew, term, trunc = self._unpack(part, rew, term, trunc, hi - lo)
-                    infos = infos or [{}] * (hi - lo)
-                self._note_restarts(restarts or [])
-            else:
-                if isinstance(outcome.value, DisabledAutoresetError):
-                    raise outcome.value
-                part, infos = self._restart_during_step(w, outcome.error)
-                rew, term, trunc = 0.0, False, True
-            self._last_parts[w] = part
-            rewards[lo:hi], terminations[lo:hi], truncations[lo:hi] = rew, term, trunc
-            infos_per_env[lo:hi] = infos
-        return (
-            self._join_obs(),
-            rewards,
-            terminations,
-            truncations,
-            self._join_infos(infos_per_env),
-        )
+            if isinstance(outcome.value, DisabledAutoresetError):
+                raise outcome.value
+            part, infos = self._restart_during_step(w, outcome.error)
+            rew = np.zeros(count, dtype=np.float64)
+            term, trunc = np.zeros(count, dtype=np.bool_), np.ones(count, dtype=np.bool_)
+        self._last_parts[w] = part
+        return StepPart(part, rew, term, trunc, list(infos))
 
     def _unpack(self, obs: bytes, rew: bytes, term: bytes, trunc: bytes, count: int) -> tuple:
         space = self.single_observation_space
@@ -320,21 +364,222 @@ class WorkerVectorEnv(VectorEnv):
         self._call_one(w, "mark_restarted", seeds, last_rows)
         return last_part, [dict(flags) for _ in range(hi - lo)]
 
+    # -- asynchronous stepping ---------------------------------------------------------
+    @property
+    def envs_in_flight(self) -> np.ndarray:
+        """Ids of the envs sent and not yet received (ascending)."""
+        ids = [np.arange(*self._slices[w], dtype=np.int64) for w in sorted(self._pending)]
+        return np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+
+    def send(self, actions: Any, env_ids: Any = None) -> None:
+        """Start stepping the envs ``env_ids`` (default: all) with ``actions`` (one row each).
+
+        ``actions`` rows follow ``env_ids`` order. Calls are per worker, so
+        ``env_ids`` must hold every env of each worker it touches, and none of
+        them may be in flight already. Results come back through :meth:`recv`.
+        """
+        self._check_open()
+        ids = check_env_ids(env_ids, self.num_envs)
+        workers = workers_of(ids, self._slices, self.envs_per_worker)
+        busy = [w for w in workers if w in self._pending]
+        if busy:
+            envs = [i for w in busy for i in range(*self._slices[w])]
+            raise EnvsInFlightError(
+                f"env_ids={ids.tolist()}: envs {envs} are already in flight (sent, not yet "
+                "received); expected envs not in flight; call recv() first"
+            )
+        unreset = [
+            i for w in workers if self._last_parts[w] is None for i in range(*self._slices[w])
+        ]
+        if unreset:
+            raise RuntimeError(f"send() to envs {unreset} before their first reset(); reset first")
+        actions = prepare_action(actions, self.single_action_space, len(ids), self.invalid_action)
+        actions = take_rows(actions, np.argsort(ids, kind="stable"))
+        self._submit("step", workers, self._step_args(workers, actions))
+
+    def step_async(self, actions: Any) -> None:
+        """Start stepping every env (Gymnasium ``AsyncVectorEnv`` semantics); see step_wait."""
+        self._check_open()
+        self._check_idle("step_async")
+        self.send(actions)
+
+    def step_wait(
+        self, timeout: float | None = None
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Wait for the step started by :meth:`step_async`; the same numbers as ``step``."""
+        self._check_open()
+        calls = self._pending.values()
+        if len(self._pending) != self.num_workers or any(c.kind != "step" for c in calls):
+            raise NoAsyncCallError(
+                "step_wait() expects a step of every env in flight (from step_async()); envs "
+                f"in flight: {self.envs_in_flight.tolist()}",
+                "step",
+            )
+        return self.recv(min_envs=self.num_envs, timeout=timeout)[:5]
+
+    def async_reset(
+        self,
+        *,
+        seed: int | list[int | None] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> None:
+        """Start resetting every env (seeds as in ``reset``); results come through recv()."""
+        self._check_open()
+        self._check_idle("async_reset")
+        if options is not None and "reset_mask" in options:
+            raise ValueError(
+                "async_reset() resets every env; options['reset_mask'] is for reset(); "
+                "expected options without 'reset_mask'"
+            )
+        seeds, options, _ = self._prepare_reset(seed, options)
+        workers = list(range(self.num_workers))
+        self._submit("reset", workers, [self._reset_args(w, seeds, options, None) for w in workers])
+
+    def recv(
+        self, min_envs: int | None = None, timeout: float | None = None
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any], np.ndarray]:
+        """Results of at least ``min_envs`` envs in flight (default: all of them).
+
+        Returns as soon as the workers that answered hold ``min_envs`` envs,
+        with every env whose worker has answered by then:
+        ``(obs, rewards, terminations, truncations, infos, env_ids)``, rows in
+        ascending ``env_ids`` order, infos batched over those rows. A reset
+        comes back with reward 0 and both flags False.
+        """
+        self._check_open()
+        if not self._pending:
+            raise NoAsyncCallError(
+                "recv() called with no envs in flight; call send(), step_async() or "
+                "async_reset() first",
+                "step",
+            )
+        need = self._check_min_envs(min_envs)
+        outcomes = self._await(need, timeout)
+        workers = sorted(outcomes)
+        calls = {w: self._pending.pop(w) for w in workers}
+        results = [self._pending_result(w, calls[w], outcomes[w]) for w in workers]
+        return self._join_results(workers, results)
+
+    def _check_idle(self, what: str) -> None:
+        if self._pending:
+            raise EnvsInFlightError(
+                f"{what}() called while envs {self.envs_in_flight.tolist()} are in flight; "
+                "expected no envs in flight: recv() them first",
+                what,
+            )
+
+    def _check_min_envs(self, min_envs: int | None) -> int:
+        in_flight = len(self.envs_in_flight)
+        if min_envs is None:
+            return in_flight
+        if (
+            isinstance(min_envs, bool)
+            or not isinstance(min_envs, (int, np.integer))
+            or not 1 <= min_envs <= in_flight
+        ):
+            raise ValueError(
+                f"min_envs={min_envs!r}: expected an integer with 1 <= min_envs <= {in_flight} "
+                "(the envs in flight)"
+            )
+        return int(min_envs)
+
+    def _submit(self, kind: str, workers: list[int], args: list[tuple[Any, ...]]) -> None:
+        method = self._step_method if kind == "step" else kind
+        for w, a in zip(workers, args, strict=True):
+            handle = self._backend.submit(w, method, *a)
+            self._pending[w] = PendingCall(kind, handle, time.monotonic(), a)
+
+    def _await(self, need: int, timeout: float | None) -> dict[int, Outcome]:
+        """Wait until answered workers hold ``need`` envs; their outcomes (hung ones: lost)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        ready = set(self._ready(sorted(self._pending), 0.0))
+        overdue: set[int] = set()
+        while self._count_envs(ready | overdue) < need:
+            waiting = [w for w in sorted(self._pending) if w not in ready | overdue]
+            ready |= set(self._ready(waiting, self._wait_budget(waiting, deadline), first=True))
+            overdue |= set(self._overdue(waiting)) - ready
+            if self._count_envs(ready | overdue) < need and _passed(deadline):
+                raise RecvTimeoutError(
+                    f"recv(min_envs={need}) timed out after {timeout} s with "
+                    f"{self._count_envs(ready | overdue)} envs answered; the envs stay in "
+                    "flight, call recv() again"
+                )
+        rest = [w for w in sorted(self._pending) if w not in ready | overdue]
+        ready |= set(self._ready(rest, 0.0))
+        answered = sorted(ready)
+        gathered = self._backend.gather(answered, self._handles(answered))
+        outcomes = dict(zip(answered, gathered, strict=True))
+        message = f"no answer within step_timeout={self._step_timeout} s"
+        outcomes.update({w: Outcome(False, None, message, lost=True) for w in overdue})
+        return outcomes
+
+    def _ready(self, workers: list[int], timeout: float | None, first: bool = False) -> list:
+        """Which of ``workers`` have answered (wait up to ``timeout``; for one, if ``first``)."""
+        if not workers:
+            return []
+        handles = self._handles(workers)
+        done = self._backend.wait(handles, 1 if first else len(handles), timeout)
+        return [workers[k] for k in done]
+
+    def _handles(self, workers: Any) -> list[Any]:
+        return [self._pending[w].handle for w in workers]
+
+    def _count_envs(self, workers: set[int]) -> int:
+        return sum(self._slices[w][1] - self._slices[w][0] for w in workers)
+
+    @property
+    def _step_timeout(self) -> float | None:
+        return getattr(self._backend, "step_timeout", None)
+
+    def _wait_budget(self, waiting: list[int], deadline: float | None) -> float | None:
+        """Seconds to wait: up to the caller's deadline or the first call's step_timeout."""
+        ends = [] if deadline is None else [deadline]
+        if self._step_timeout is not None:
+            ends += [self._pending[w].submitted + self._step_timeout for w in waiting]
+        return max(0.0, min(ends) - time.monotonic()) if ends else None
+
+    def _overdue(self, workers: list[int]) -> list[int]:
+        if self._step_timeout is None:
+            return []
+        now = time.monotonic()
+        return [w for w in workers if now - self._pending[w].submitted >= self._step_timeout]
+
+    def _pending_result(self, w: int, call: PendingCall, outcome: Outcome) -> StepPart:
+        """A step's or a reset's part; a failed reset is redone on a replacement worker."""
+        if call.kind == "step":
+            return self._step_result(w, outcome)
+        while not outcome.ok:
+            self._replace_worker(w, outcome.error)
+            (outcome,) = self._call_all([w], "reset", [call.args])
+        infos = self._take_reset(w, outcome.value)
+        count = len(infos)
+        zeros = np.zeros(count, dtype=np.bool_)
+        return StepPart(self._last_parts[w], np.zeros(count), zeros, zeros.copy(), infos)
+
     # -- joining -----------------------------------------------------------------------
     def _join_obs(self) -> Any:
         return concat_batches(self.single_observation_space, self._last_parts)
 
     def _join_infos(self, infos_per_env: list[dict[str, Any]]) -> dict[str, Any]:
-        infos: dict[str, Any] = {}
-        for i, info in enumerate(infos_per_env):
-            if info:
-                infos = self._add_info(infos, info, i)
-        return infos
+        return batch_infos(infos_per_env)
+
+    def _join_results(self, workers: list[int], results: list[StepPart]) -> tuple:
+        """(obs, rewards, terminations, truncations, infos, env_ids) of ``workers``, in order."""
+        space = self.single_observation_space
+        return (
+            concat_batches(space, [r.obs for r in results]),
+            np.concatenate([r.rewards for r in results]).astype(np.float64, copy=False),
+            np.concatenate([r.terminations for r in results]).astype(np.bool_, copy=False),
+            np.concatenate([r.truncations for r in results]).astype(np.bool_, copy=False),
+            batch_infos([info for r in results for info in r.infos]),
+            np.concatenate([np.arange(*self._slices[w], dtype=np.int64) for w in workers]),
+        )
 
     # -- generic access ----------------------------------------------------------------
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """Call ``name`` on every env (or read it, if not callable); results in env order."""
         self._check_open()
+        self._check_idle("call")
         workers = list(range(self.num_workers))
         outcomes = self._call_all(workers, "call", [(name, args, kwargs)] * self.num_workers)
         return tuple(item for w in workers for item in self._unwrap(w, outcomes[w], name))
@@ -346,6 +591,7 @@ class WorkerVectorEnv(VectorEnv):
     def set_attr(self, name: str, values: list[Any] | tuple[Any, ...] | Any) -> None:
         """Set ``name`` on every env: one value for all, or a list with one per env."""
         self._check_open()
+        self._check_idle("set_attr")
         if not isinstance(values, (list, tuple)):
             values = [values] * self.num_envs
         if len(values) != self.num_envs:
@@ -378,6 +624,7 @@ class WorkerVectorEnv(VectorEnv):
     def close_extras(self, **kwargs: Any) -> None:
         if not self._started:
             return
+        self._pending.clear()  # calls in flight finish before close() reaches each worker
         try:
             workers = list(range(self.num_workers))
             self._call_all(workers, "close", [()] * self.num_workers)
@@ -419,3 +666,7 @@ def _check_reset_mask(reset_mask: Any, num_envs: int) -> np.ndarray:
     if not reset_mask.any():
         raise ValueError("options['reset_mask'] must contain at least one True value")
     return reset_mask
+
+
+def _passed(deadline: float | None) -> bool:
+    return deadline is not None and time.monotonic() >= deadline

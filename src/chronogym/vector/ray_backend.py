@@ -200,6 +200,12 @@ class RayBackend:
                 outcomes.append(Outcome(False, error, traceback.format_exc(), lost=True))
         return outcomes
 
+    def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]:
+        """Indices of ``handles`` that have answered (``ray.wait``; a dead worker counts)."""
+        ready, _ = self._ray.wait(handles, num_returns=num_returns, timeout=timeout)
+        done = set(ready)
+        return [k for k, handle in enumerate(handles) if handle in done]
+
     def pid(self, worker: int) -> int:
         if self._pids[worker] is None:
             self._pids[worker] = self._ray.get(self.actors[worker].pid.remote())

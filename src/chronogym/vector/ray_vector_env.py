@@ -41,6 +41,33 @@ class RayVectorEnv(WorkerVectorEnv):
             treated as lost and replaced (default: wait forever).
         env_kwargs: keyword arguments for ``gymnasium.make`` when ``env_fns``
             is an id.
+
+    ``step`` is one barrier over every worker. For algorithms that tolerate it,
+    stepping can also be asynchronous (EnvPool-style):
+
+    - ``send(actions, env_ids=None)`` starts stepping some envs; ``actions``
+      rows follow ``env_ids``. One remote call steps a whole worker, so
+      ``env_ids`` must hold every env of each worker it touches (else a
+      ValueError names the missing ids), and none may be in flight already.
+    - ``recv(min_envs=None, timeout=None)`` returns as soon as the workers
+      that answered hold ``min_envs`` envs (default: every env in flight),
+      with every env answered by then: ``(obs, rewards, terminations,
+      truncations, infos, env_ids)``, rows in ascending ``env_ids``, infos
+      batched over those rows as Gymnasium does. On ``timeout`` it raises
+      ``RecvTimeoutError`` and the envs stay in flight.
+    - ``step_async(actions)`` / ``step_wait(timeout=None)``: ``step`` in two
+      halves, as in Gymnasium's ``AsyncVectorEnv``; the same numbers as ``step``.
+    - ``async_reset(seed=None, options=None)`` resets every env (seeds as in
+      ``reset``); results come through ``recv`` with reward 0, flags False.
+    - Nothing is drained implicitly: while envs are in flight, ``step``,
+      ``reset``, ``step_async``, ``call``, ``get_attr``, ``set_attr`` and
+      ``render`` raise ``EnvsInFlightError`` (a Gymnasium
+      ``AlreadyPendingCallError``); ``close`` is allowed.
+    - Autoreset (NEXT_STEP, SAME_STEP) runs per env inside its worker, so each
+      env's trajectory depends only on its seed and its own actions, never on
+      arrival order. A worker found dead when its answer is collected, or
+      silent for ``step_timeout`` s after its send, is replaced and its envs
+      come back truncated, as with ``step``.
     """
 
     def __init__(

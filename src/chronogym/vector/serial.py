@@ -38,6 +38,9 @@ class LocalBackend:
     def gather(self, workers: list[int], handles: list[Outcome]) -> list[Outcome]:
         return handles
 
+    def wait(self, handles: list[Outcome], num_returns: int, timeout: float | None) -> list[int]:
+        return list(range(len(handles)))  # every call ran when it was submitted
+
     def pid(self, worker: int) -> int:
         return self.groups[worker].pid()
 
