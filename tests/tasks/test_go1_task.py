@@ -304,40 +304,6 @@ def test_bad_config_values_name_the_field():
         DomainRandomization(friction=(0.0, 1.0))
 
 
-def test_same_seed_same_trajectory_on_ray_and_in_gymnasium(ray_cluster):
-    """Go1 with every randomization on: RayVectorEnv (2 workers) == Gymnasium's SyncVectorEnv."""
-    import gymnasium as gym
-    from gymnasium.utils.env_checker import data_equivalence
-
-    kwargs = {
-        "randomization": DomainRandomization(push_interval_s=0.1),
-        "max_episode_steps": 12,
-    }
-    same_step = gym.vector.AutoresetMode.SAME_STEP
-    ray_vec = chronogym.make_vec(
-        "chronogym/Go1Velocity-v0", 3, backend="ray", envs_per_worker=2,
-        autoreset_mode=same_step, env_kwargs=kwargs,
-    )  # fmt: skip
-    sync_vec = gym.make_vec(
-        "chronogym/Go1Velocity-v0", 3, vectorization_mode="sync",
-        vector_kwargs={"autoreset_mode": same_step}, **kwargs,
-    )  # fmt: skip
-    try:
-        results = []
-        for vec in (ray_vec, sync_vec):
-            obs, _ = vec.reset(seed=5)
-            steps = [obs]
-            for actions in np.random.default_rng(1).normal(0, 1, (30, 3, 12)).astype(np.float32):
-                obs, reward, terminated, truncated, infos = vec.step(actions)
-                steps.append((obs, reward, terminated, truncated, infos.get("final_obs")))
-            results.append(steps)
-        assert data_equivalence(results[0], results[1], exact=True)
-        assert any(step[3].any() for step in results[0][1:])  # episodes ended and restarted
-    finally:
-        ray_vec.close()
-        sync_vec.close()
-
-
 def _soil_env(**kwargs) -> SimEnv:
     env = SimEnv(Go1VelocityTask(terrain="soil", reset_joint_noise=0.0, **kwargs))
     env.reset(seed=0, options={"command": (0.0, 0.0, 0.0)})
@@ -373,31 +339,43 @@ def test_the_soil_window_follows_the_trunk():
     assert task.feet_contact_now.all() and task.data.qpos[2] > 0.15  # still on the soil
 
 
-def test_same_seed_same_trajectory_on_soil_on_ray_and_in_gymnasium(ray_cluster):
-    """Go1 on soil: RayVectorEnv (2 workers) == Gymnasium's SyncVectorEnv, bit for bit."""
+def _ray_matches_gymnasium(num_envs: int, envs_per_worker: int, steps: int, **kwargs) -> None:
+    """RayVectorEnv == Gymnasium's SyncVectorEnv bit for bit (SAME_STEP, random actions), and
+    some episode was truncated and restarted on the way."""
     from gymnasium.utils.env_checker import data_equivalence
 
-    kwargs = {"terrain": "soil", "max_episode_steps": 8}
     same_step = gym.vector.AutoresetMode.SAME_STEP
     ray_vec = chronogym.make_vec(
-        "chronogym/Go1Velocity-v0", 2, backend="ray", envs_per_worker=1,
+        "chronogym/Go1Velocity-v0", num_envs, backend="ray", envs_per_worker=envs_per_worker,
         autoreset_mode=same_step, env_kwargs=kwargs,
     )  # fmt: skip
     sync_vec = gym.make_vec(
-        "chronogym/Go1Velocity-v0", 2, vectorization_mode="sync",
+        "chronogym/Go1Velocity-v0", num_envs, vectorization_mode="sync",
         vector_kwargs={"autoreset_mode": same_step}, **kwargs,
     )  # fmt: skip
+    rng_actions = np.random.default_rng(1).normal(0, 1, (steps, num_envs, 12)).astype(np.float32)
     try:
         results = []
         for vec in (ray_vec, sync_vec):
-            obs, _ = vec.reset(seed=11)
-            steps = [obs]
-            for actions in np.random.default_rng(2).normal(0, 1, (20, 2, 12)).astype(np.float32):
+            obs, _ = vec.reset(seed=5)
+            trajectory = [obs]
+            for actions in rng_actions:
                 obs, reward, terminated, truncated, infos = vec.step(actions)
-                steps.append((obs, reward, terminated, truncated, infos.get("final_obs")))
-            results.append(steps)
+                trajectory.append((obs, reward, terminated, truncated, infos.get("final_obs")))
+            results.append(trajectory)
         assert data_equivalence(results[0], results[1], exact=True)
-        assert any(step[3].any() for step in results[0][1:])  # episodes restarted on fresh soil
+        assert any(step[3].any() for step in results[0][1:])  # episodes ended and restarted
     finally:
         ray_vec.close()
         sync_vec.close()
+
+
+def test_same_seed_same_trajectory_on_ray_and_in_gymnasium(ray_cluster):
+    """Go1 with every randomization on: RayVectorEnv (2 workers) == Gymnasium's SyncVectorEnv."""
+    randomization = DomainRandomization(push_interval_s=0.1)
+    _ray_matches_gymnasium(3, 2, 30, randomization=randomization, max_episode_steps=12)
+
+
+def test_same_seed_same_trajectory_on_soil_on_ray_and_in_gymnasium(ray_cluster):
+    """Go1 on soil (fresh soil after each reset): Ray (2 workers) == SyncVectorEnv."""
+    _ray_matches_gymnasium(2, 1, 20, terrain="soil", max_episode_steps=8)
