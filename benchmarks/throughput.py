@@ -8,6 +8,8 @@ Prints an aligned table and writes JSON (default ``benchmarks/results/throughput
     python benchmarks/throughput.py            # default sweep, < 4 min on 2 cores
     python benchmarks/throughput.py --quick    # smoke run, < 1 min
     python benchmarks/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
+    python benchmarks/throughput.py --transports actor compiled   # both RayVectorEnv transports
+    python benchmarks/throughput.py --breakdown   # one vector step split into phases (µs)
 
 Counting: ``steps/s`` counts env steps as Gymnasium does, including the autoreset
 steps of NEXT_STEP mode, which run no physics. With random actions the pole falls
@@ -15,6 +17,13 @@ within a step or two once ``k`` is large, so up to half of all steps are such re
 ``sim-steps/s`` counts only the env steps that ran physics; the AsyncVectorEnv ratio
 and the parallel efficiency use it, so they compare like with like and against the
 raw single-env rate (``k`` ticks + observe per step).
+
+``--breakdown`` replaces the sweep by a table of where one vector step's time goes (driver
+prepare / submit / wait / get / join, worker compute and (de)serialization, Ray's call and
+transfer) per transport and envs_per_worker at N = 16, with the CPU the workers use while idle
+(polling) and the check against the overhead budget (100 µs + 5 µs per env); see
+``RayVectorEnv.profile_steps``. The sweep ends with the goal table of the default transport:
+x_async and efficiency per cost level side by side.
 
 ``--async-k`` adds ``ray-async`` rows: the same Ray shapes (two workers or more)
 driven by ``send`` / ``recv(min_envs=N/2)``, each answered worker sent its next
@@ -26,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import inspect
 import json
 import math
 import os
@@ -46,7 +56,10 @@ from chronogym.tasks.cartpole import CartPoleTask
 ENV_ID = "chronogym/CartPole-v0"
 DT = 0.002
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "throughput.json"
-VECTOR_BACKENDS = ("serial", "async", "ray", "ray-async")
+BREAKDOWN_OUT = DEFAULT_OUT.with_name("throughput_breakdown.json")
+TRANSPORT_BACKENDS = {"actor": "ray", "compiled": "ray-cg"}  # RayVectorEnv transport -> row
+VECTOR_BACKENDS = ("serial", "async", "ray", "ray-cg", "ray-async")
+DEFAULT_TRANSPORT = str(inspect.signature(chronogym.RayVectorEnv).parameters["transport"].default)
 RAW_MIN_SECONDS = 0.5  # shortest timing of the raw loop
 RAY_SETTLE_S = 2.0  # let a fresh Ray cluster's processes finish starting before timing
 
@@ -131,10 +144,47 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="also time RayVectorEnv send/recv with min_envs = N/2 (shapes with >= 2 workers)",
     )
+    parser.add_argument(
+        "--transports",
+        nargs="+",
+        choices=tuple(TRANSPORT_BACKENDS),
+        default=[DEFAULT_TRANSPORT],
+        help=f"RayVectorEnv transports of the main sweep (default: {DEFAULT_TRANSPORT}, "
+        "RayVectorEnv's default); compiled rows are labelled ray-cg",
+    )
+    parser.add_argument(
+        "--breakdown",
+        action="store_true",
+        help="instead of the sweep: time each phase of one vector step per transport and "
+        "envs_per_worker at the cheapest cost level (see --breakdown-envs)",
+    )
+    parser.add_argument(
+        "--breakdown-envs", type=int, default=16, help="num_envs of the --breakdown table"
+    )
+    parser.add_argument(
+        "--breakdown-per-worker",
+        type=int,
+        nargs="+",
+        default=[16, 8, 4],
+        help="envs_per_worker values of the --breakdown table",
+    )
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=3,
+        help="--breakdown: rounds over every row, interleaved; the table shows medians",
+    )
     parser.add_argument("--warmup", type=int, default=5, help="untimed vector steps per config")
     parser.add_argument("--seed", type=int, default=0, help="seed of envs and random actions")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON output path")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help=f"JSON output (default {DEFAULT_OUT.name}; --breakdown: {BREAKDOWN_OUT.name})",
+    )
     args = parser.parse_args(argv)
+    if args.out is None:
+        args.out = BREAKDOWN_OUT if args.breakdown else DEFAULT_OUT
     if args.quick:
         args.seconds = min(args.seconds, 0.3)
         args.num_envs = [2, 8]
@@ -249,12 +299,13 @@ def make_vector_env(config: Config) -> gym.vector.VectorEnv:
         return chronogym.SerialVectorEnv(ENV_ID, config.num_envs, env_kwargs=env_kwargs)
     if config.backend == "async":
         return gym.make_vec(ENV_ID, config.num_envs, vectorization_mode="async", **env_kwargs)
-    if config.backend in ("ray", "ray-async"):
+    if config.backend in ("ray", "ray-cg", "ray-async"):
         return chronogym.RayVectorEnv(
             ENV_ID,
             config.num_envs,
             envs_per_worker=config.envs_per_worker,
             env_kwargs=env_kwargs,
+            transport="compiled" if config.backend == "ray-cg" else "actor",
         )
     raise ValueError(f"backend={config.backend!r}: expected one of {VECTOR_BACKENDS}")
 
@@ -372,15 +423,24 @@ def ray_shapes(num_envs: int, one_per_worker: int) -> list[tuple[int, int]]:
 
 
 def vector_configs(
-    level: CostLevel, num_envs: int, one_per_worker: int, async_k: bool = False
+    level: CostLevel,
+    num_envs: int,
+    one_per_worker: int,
+    async_k: bool = False,
+    transports: tuple[str, ...] = ("actor",),
 ) -> list[Config]:
-    """Serial, Async and the Ray sweep (with ``async_k``: send/recv too) at one level and N."""
+    """Serial, Async and the Ray sweep (with ``async_k``: send/recv too) at one level and N.
+
+    Compiled-graph rows (``ray-cg``) skip the one-env-per-worker shape: its actors poll.
+    """
     configs = [
         Config("serial", num_envs, 1, num_envs, level),
         Config("async", num_envs, num_envs, 1, level),
     ]
     for workers, per in ray_shapes(num_envs, one_per_worker):
-        configs.append(Config("ray", num_envs, workers, per, level))
+        for transport in transports:
+            if transport == "actor" or per > 1 or num_envs == 1:
+                configs.append(Config(TRANSPORT_BACKENDS[transport], num_envs, workers, per, level))
         if async_k and workers >= 2:
             configs.append(Config("ray-async", num_envs, workers, per, level, num_envs // 2))
     return configs
@@ -392,7 +452,9 @@ def build_plan(levels: list[CostLevel], args: argparse.Namespace) -> list[Config
     for level in levels:
         plan += [Config("raw", 1, 1, 1, level), Config("simenv", 1, 1, 1, level)]
         for num_envs in args.num_envs:
-            plan += vector_configs(level, num_envs, args.one_per_worker, args.async_k)
+            plan += vector_configs(
+                level, num_envs, args.one_per_worker, args.async_k, tuple(args.transports)
+            )
     return plan
 
 
@@ -523,6 +585,7 @@ def write_json(
             for key, value in vars(args).items()
         },
         "tick_us": tick_us,
+        "default_transport": DEFAULT_TRANSPORT,
         "cost_levels": levels,
         "results": [result_record(r) for r in results],
     }
@@ -553,6 +616,239 @@ def result_record(r: Result) -> dict[str, Any]:
     }
 
 
+# -- goals ----------------------------------------------------------------------------------
+
+CHEAP_X_ASYNC = 1.5  # goal on the cheapest cost level
+X_ASYNC = 1.0  # goal at every cost level
+EFFICIENCY = 0.9  # goal where one remote call carries >= EFFICIENCY_MIN_CALL_MS of physics
+EFFICIENCY_MIN_CALL_MS = 1.0
+
+
+def best_rows(results: list[Result], backend: str) -> list[Result]:
+    """Per (cost level, N): the ``backend`` row with the most sim-steps/s."""
+    best: dict[tuple[int, int], Result] = {}
+    for r in results:
+        key = (r.config.level.k, r.config.num_envs)
+        if r.config.backend == backend and (
+            key not in best or r.sim_steps_per_s > best[key].sim_steps_per_s
+        ):
+            best[key] = r
+    return list(best.values())
+
+
+def goal_table(results: list[Result], backend: str) -> str:
+    """x_async and efficiency of ``backend``'s best shape per cost level and N, with the goals."""
+    cheapest = min(r.config.level.k for r in results)
+    lines = [
+        f"goals for {backend} (best shape per row): x_async >= {X_ASYNC} everywhere, >= "
+        f"{CHEAP_X_ASYNC} on the cheapest cost; eff >= {EFFICIENCY} where phys/call >= "
+        f"{EFFICIENCY_MIN_CALL_MS:g} ms",
+        f"{'phys/step':>10}  {'N':>3}  {'wrk':>3}  {'e/w':>3}  {'phys/call':>9}  "
+        f"{'x_async':>7}  {'goal':>5}  {'eff':>5}  {'goal':>5}",
+    ]
+    for r in best_rows(results, backend):
+        c, d = r.config, r.derived
+        x_goal = CHEAP_X_ASYNC if c.level.k == cheapest else X_ASYNC
+        x_ok = d["vs_async"] is not None and d["vs_async"] >= x_goal
+        call_ms = d["physics_us_per_call"] / 1000  # type: ignore[operator]
+        eff_ok = "-" if call_ms < EFFICIENCY_MIN_CALL_MS else _ok(d["efficiency"] >= EFFICIENCY)
+        lines.append(
+            f"{d['physics_us_per_step']:>8.0f}µs  {c.num_envs:>3}  {c.workers:>3}  "
+            f"{c.envs_per_worker:>3}  {call_ms:>7.2f}ms  {d['vs_async'] or 0:>7.2f}  "
+            f"{_ok(x_ok):>5}  {d['efficiency']:>5.2f}  {eff_ok:>5}"
+        )
+    return "\n".join(lines)
+
+
+def _ok(passed: bool) -> str:
+    return "ok" if passed else "MISS"
+
+
+# -- per-phase breakdown (--breakdown) -----------------------------------------------------
+
+
+@dataclass
+class Breakdown:
+    """One vector env's step split into phases (µs per vector step), and its CPU use."""
+
+    transport: str  # actor | compiled | serial
+    num_envs: int
+    workers: int
+    envs_per_worker: int
+    k: int
+    us_per_vstep: float  # wall time of an unprofiled vector step
+    phases: dict[str, float]  # StepProfile.per_step_us() of a profiled run
+    busy_cpu: dict[str, float]  # % of one core while stepping: workers (sum), driver
+    idle_cpu: dict[str, float]  # % of one core while nobody steps: workers (sum), driver
+
+    @property
+    def overhead_us(self) -> float:
+        """µs per profiled vector step that are not the slowest worker's physics."""
+        return self.phases["total"] - self.phases["compute"]
+
+    @property
+    def budget_us(self) -> float:
+        """The issue's driver-overhead budget: 100 µs + 5 µs per env."""
+        return 100.0 + 5.0 * self.num_envs
+
+
+def proc_cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) process ``pid`` used so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def cpu_percent(pids: list[int], run: Any) -> dict[str, float]:
+    """% of one core the ``pids`` (summed) and this process used while ``run()`` ran."""
+    before = [proc_cpu_s(pid) for pid in pids]
+    driver, start = time.process_time(), time.perf_counter()
+    run()
+    wall = time.perf_counter() - start
+    used = sum(proc_cpu_s(pid) for pid in pids) - sum(before)
+    return {
+        "workers": 100 * used / wall,
+        "driver": 100 * (time.process_time() - driver) / wall,
+    }
+
+
+def breakdown_env(transport: str, num_envs: int, per: int, k: int) -> gym.vector.VectorEnv:
+    """The vector env of one breakdown row."""
+    env_kwargs = {"k": k, "dt": DT}
+    if transport == "serial":
+        return chronogym.SerialVectorEnv(ENV_ID, num_envs, env_kwargs=env_kwargs)
+    return chronogym.RayVectorEnv(
+        ENV_ID, num_envs, envs_per_worker=per, env_kwargs=env_kwargs, transport=transport
+    )
+
+
+def run_breakdown_one(
+    transport: str, num_envs: int, per: int, k: int, args: argparse.Namespace
+) -> Breakdown:
+    """Time ``step`` unprofiled (with CPU use), then profiled, then the idle CPU use."""
+    env = breakdown_env(transport, num_envs, per, k)
+    try:
+        pids = [] if transport == "serial" else env.worker_pids()
+        timed: dict[str, Any] = {}
+
+        def plain() -> None:
+            timed["calls"], _, timed["s"] = time_vector_env(
+                env, args.seconds, args.warmup, args.seed
+            )
+
+        busy = cpu_percent(pids, plain)
+        profile = env.profile_steps()
+        time_vector_env(env, args.seconds, args.warmup, args.seed)
+        env.profile_steps(enabled=False)
+        phases = profile.per_step_us()
+        idle = cpu_percent(pids, lambda: time.sleep(min(args.seconds, 1.0)))
+    finally:
+        env.close()
+    workers = 1 if transport == "serial" else math.ceil(num_envs / per)
+    return Breakdown(
+        transport,
+        num_envs,
+        workers,
+        num_envs if transport == "serial" else per,
+        k,
+        timed["s"] / timed["calls"] * 1e6,
+        phases,
+        busy,
+        idle,
+    )
+
+
+def median_breakdown(runs: list[Breakdown]) -> Breakdown:
+    """Each number of the row: its median over ``runs`` (the same row, repeated)."""
+
+    def med(values: list[float]) -> float:
+        return float(np.median(values))
+
+    first = runs[0]
+    return Breakdown(
+        first.transport,
+        first.num_envs,
+        first.workers,
+        first.envs_per_worker,
+        first.k,
+        med([b.us_per_vstep for b in runs]),
+        {key: med([b.phases[key] for b in runs]) for key in first.phases},
+        {key: med([b.busy_cpu[key] for b in runs]) for key in first.busy_cpu},
+        {key: med([b.idle_cpu[key] for b in runs]) for key in first.idle_cpu},
+    )
+
+
+def breakdown_plan(args: argparse.Namespace) -> list[tuple[str, int]]:
+    """(transport, envs_per_worker) rows: serial, then each transport at each shape."""
+    n = args.breakdown_envs
+    pers = [p for p in args.breakdown_per_worker if 1 <= p <= n]
+    return [("serial", n)] + [(t, p) for t in TRANSPORT_BACKENDS for p in pers]
+
+
+BREAKDOWN_COLUMNS = (  # header, width, phase key or property
+    ("prep", "prepare"),
+    ("submit", "submit"),
+    ("wait", "wait"),
+    ("get", "get"),
+    ("join", "join"),
+    ("w-comp", "compute"),
+    ("w-serde", "serde"),
+    ("call+xfer", "call"),
+    ("driver", "driver"),
+)
+
+
+def format_breakdown(rows: list[Breakdown]) -> str:
+    """The breakdown table (µs per vector step) and the overhead-budget check per row."""
+    head = f"{'transport':>9}  {'N':>3}  {'wrk':>3}  {'e/w':>3}  {'µs/vstep':>8}  "
+    head += "  ".join(f"{name:>9}" for name, _ in BREAKDOWN_COLUMNS)
+    head += f"  {'overhead':>8}  {'budget':>6}  {'drv':>4}  {'ovh':>4}  {'cpu-idle':>9}  "
+    head += f"{'cpu-busy':>9}"
+    lines = [head, "-" * len(head)]
+    for b in rows:
+        cells = "  ".join(
+            f"{'-' if b.transport == 'serial' and key == 'call' else round(b.phases[key]):>9}"
+            for _, key in BREAKDOWN_COLUMNS
+        )
+        lines.append(
+            f"{b.transport:>9}  {b.num_envs:>3}  {b.workers:>3}  {b.envs_per_worker:>3}  "
+            f"{b.us_per_vstep:>8.0f}  {cells}  {b.overhead_us:>8.0f}  {b.budget_us:>6.0f}  "
+            f"{'-' if b.transport == 'serial' else _ok(b.phases['driver'] <= b.budget_us):>4}"
+            f"  {_ok(b.overhead_us <= b.budget_us):>4}"
+            f"  {b.idle_cpu['workers']:>4.0f}/{b.idle_cpu['driver']:<4.0f}"
+            f"  {b.busy_cpu['workers']:>4.0f}/{b.busy_cpu['driver']:<4.0f}"
+        )
+    return "\n".join(lines)
+
+
+BREAKDOWN_NOTES = """\
+µs per vector step. Driver: prep = check actions + split into per-worker bytes; submit = the
+.remote() calls (compiled: the graph's execute); wait = the barrier (compiled: also reads and
+deserializes the answers); get = ray.get of the answers; join = unpack and join them.
+Workers (measured inside, slowest worker of each step): w-comp = time in the envs' step;
+w-serde = actions from bytes, results to bytes. call+xfer = wait - w-comp - w-serde: Ray's call
+and transfer, and waiting for a core. driver = prep + submit + get + join (the driver's own work).
+serial: everything runs inside submit (no Ray). µs/vstep: an unprofiled run.
+overhead = profiled µs/vstep - w-comp; budget = 100 µs + 5 µs x N (the issue's goal); drv / ovh:
+driver / overhead within budget. cpu-idle, cpu-busy: % of one core used by the workers (summed) /
+the driver while nothing steps / while stepping (a polling transport shows up in cpu-idle)."""
+
+
+def run_breakdown(args: argparse.Namespace, tick_us: float) -> list[Breakdown]:
+    """Every breakdown row at the cheapest cost level; prints the table."""
+    (level,) = choose_levels([min(args.targets_us)], tick_us)
+    plan = breakdown_plan(args)
+    rounds: list[list[Breakdown]] = [[] for _ in plan]
+    steps = [(i, row) for _ in range(max(args.repeat, 1)) for i, row in enumerate(plan)]
+    for i, (transport, per) in tqdm(steps, desc="breakdown", file=sys.stderr):
+        rounds[i].append(run_breakdown_one(transport, args.breakdown_envs, per, level.k, args))
+    rows = [median_breakdown(runs) for runs in rounds]
+    print(f"breakdown at k={level.k} ({level.k * tick_us:.0f} µs of physics per env step)")
+    print(format_breakdown(rows))
+    print()
+    print(BREAKDOWN_NOTES)
+    return rows
+
+
 # -- main -----------------------------------------------------------------------------------
 
 
@@ -576,6 +872,8 @@ def main(argv: list[str] | None = None) -> int:
     wall = time.perf_counter()
     cpus = cpu_count()
     tick_us = measure_tick_us(max(args.seconds, 0.3), args.seed)
+    if args.breakdown:
+        return main_breakdown(args, tick_us, wall)
     levels = choose_levels(args.targets_us, tick_us)
     plan = build_plan(levels, args)
     import ray
@@ -591,7 +889,36 @@ def main(argv: list[str] | None = None) -> int:
     print(format_table(results))
     print()
     print(notes(cpus, tick_us, results))
+    for transport in args.transports:
+        print()
+        print(goal_table(results, TRANSPORT_BACKENDS[transport]))
     write_json(args.out, machine_info(), args, tick_us, results)
+    print(f"\nwrote {args.out} ({time.perf_counter() - wall:.0f} s in all)")
+    return 0
+
+
+def main_breakdown(args: argparse.Namespace, tick_us: float, wall: float) -> int:
+    """The --breakdown mode: the phase table per transport and shape, and its JSON."""
+    import ray
+
+    start_ray()
+    try:
+        rows = run_breakdown(args, tick_us)
+    finally:
+        ray.shutdown()
+    payload = {
+        "benchmark": "chronogym vector-step breakdown (cart-pole)",
+        "env_id": ENV_ID,
+        "machine": machine_info(),
+        "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
+        "tick_us": tick_us,
+        "default_transport": DEFAULT_TRANSPORT,
+        "rows": [
+            {**asdict(b), "overhead_us": b.overhead_us, "budget_us": b.budget_us} for b in rows
+        ],
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(payload, indent=2) + "\n")
     print(f"\nwrote {args.out} ({time.perf_counter() - wall:.0f} s in all)")
     return 0
 

@@ -140,16 +140,22 @@ class _RayPool:
         workers: int,
         num_cpus: float | None,
         address: str | None,
+        scheduling: str = "default",
     ) -> None:
         import ray
 
-        from chronogym.vector.ray_backend import ensure_ray, resolve_worker_cpus
+        from chronogym.vector.ray_backend import (
+            actor_scheduling,
+            ensure_ray,
+            resolve_worker_cpus,
+        )
 
+        placement = actor_scheduling(scheduling)
         ensure_ray(address)
         self.ray = ray
         cpus = resolve_worker_cpus(num_cpus, workers)
         self.actor_cls = ray.remote(TrialWorker).options(
-            num_cpus=cpus, max_restarts=0, max_task_retries=0
+            num_cpus=cpus, max_restarts=0, max_task_retries=0, **placement
         )
         self.factory = evaluator_factory
         self.actors = [self.actor_cls.remote(evaluator_factory) for _ in range(workers)]
@@ -178,10 +184,15 @@ class _RayPool:
     def replace(self, worker: int) -> None:
         import contextlib
 
+        from chronogym.vector.ray_backend import start_with_retries
+
         with contextlib.suppress(Exception):
             self.ray.kill(self.actors[worker], no_restart=True)
-        self.actors[worker] = self.actor_cls.remote(self.factory)
-        self.ray.get(self.actors[worker].ready.remote())
+        self.actors[worker] = start_with_retries(
+            lambda: self.actor_cls.remote(self.factory),
+            lambda actor: self.ray.get(actor.ready.remote()),
+            (self.ray.exceptions.RayActorError,),
+        )
 
     def pid(self, worker: int) -> int:
         return self.ray.get(self.actors[worker].pid.remote())
@@ -230,6 +241,7 @@ def run_parallel_study(
     backend: str = "ray",
     num_cpus: float | None = None,
     address: str | None = None,
+    scheduling: str = "default",
     max_retries: int = 1,
     trial_timeout: float | None = None,
     progress: bool = True,
@@ -246,6 +258,8 @@ def run_parallel_study(
         n_trials: total finished trials wanted in the study (resuming counts the
             ones already there).
         workers: trials evaluated at once. backend: ``"ray"`` or ``"serial"``.
+        scheduling: ``"default"`` or ``"spread"`` (Ray workers over as many
+            nodes as possible; see :class:`~chronogym.vector.RayVectorEnv`).
         max_retries: re-runs of a trial whose worker died. trial_timeout: seconds
             before a worker is considered hung.
         pool_hook: called with the worker pool once started (fault-injection tests).
@@ -262,6 +276,9 @@ def run_parallel_study(
         raise ValueError(f"max_retries={max_retries!r}: expected an integer >= 0")
     if trial_timeout is not None and not trial_timeout > 0:
         raise ValueError(f"trial_timeout={trial_timeout!r}: expected None or seconds > 0")
+    from chronogym.vector.ray_backend import actor_scheduling
+
+    actor_scheduling(scheduling)  # validates it
 
     report = StudyReport(study.study_name)
     report.recovered = recover_stale_trials(study)
@@ -270,7 +287,7 @@ def run_parallel_study(
     pool: _Pool = (
         _SerialPool(evaluator_factory)
         if backend == "serial"
-        else _RayPool(evaluator_factory, workers, num_cpus, address)
+        else _RayPool(evaluator_factory, workers, num_cpus, address, scheduling)
     )
     report.startup = time.perf_counter() - start
     start = time.perf_counter()  # history and elapsed count from the first trial on

@@ -10,6 +10,8 @@ reported as truncated with ``info["worker_restarted"] = True``.
 Besides that barrier, ``send`` / ``recv`` step subsets of whole workers without
 one (EnvPool-style), and ``step_async`` / ``step_wait`` split a full step the
 way Gymnasium's ``AsyncVectorEnv`` does; see :mod:`chronogym.vector.pending`.
+``profile_steps()`` times the phases of each barrier step (off by default); see
+:mod:`chronogym.vector.profile`.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from chronogym.vector.pending import (
     check_env_ids,
     workers_of,
 )
+from chronogym.vector.profile import StepProfile, now
 
 logger = logging.getLogger("chronogym")
 
@@ -168,6 +171,7 @@ class WorkerVectorEnv(VectorEnv):
         self._last_parts: list[Any] = [None] * self.num_workers
         self._pending: dict[int, PendingCall] = {}  # worker -> its call in flight
         self._packed = isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
+        self.profile: StepProfile | None = None  # see profile_steps()
 
     # -- workers -----------------------------------------------------------------------
     def _group_kwargs(self, w: int) -> dict[str, Any]:
@@ -204,8 +208,14 @@ class WorkerVectorEnv(VectorEnv):
         return outcome.value
 
     def _call_all(self, workers: list[int], method: str, args: list[tuple[Any, ...]]) -> list:
-        handles = [self._backend.submit(w, method, *a) for w, a in zip(workers, args, strict=True)]
-        return self._backend.gather(workers, handles)
+        return self._backend.gather(workers, self._submit_all(workers, method, args))
+
+    def _submit_all(self, workers: list[int], method: str, args: list[tuple[Any, ...]]) -> list:
+        """One call per worker; a backend with ``submit_all`` issues them together."""
+        submit_all = getattr(self._backend, "submit_all", None)
+        if submit_all is not None:
+            return submit_all(workers, method, args)
+        return [self._backend.submit(w, method, *a) for w, a in zip(workers, args, strict=True)]
 
     def _count_restart(self, env_index: int, error: str) -> None:
         self._restart_counts[env_index] += 1
@@ -298,6 +308,8 @@ class WorkerVectorEnv(VectorEnv):
         self._check_idle("step")
         if self._last_parts[0] is None:
             raise RuntimeError("step() called before reset(); call reset() first")
+        if self.profile is not None:
+            return self._step_profiled(actions, self.profile)
         actions = prepare_action(
             actions, self.single_action_space, self.num_envs, self.invalid_action
         )
@@ -305,6 +317,37 @@ class WorkerVectorEnv(VectorEnv):
         outcomes = self._call_all(workers, self._step_method, self._step_args(workers, actions))
         results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
         return self._join_results(workers, results)[:5]
+
+    def profile_steps(self, enabled: bool = True) -> StepProfile | None:
+        """Time every following ``step`` phase by phase (``enabled=False``: stop).
+
+        Returns the :class:`~chronogym.vector.profile.StepProfile` that collects
+        the timings (``per_step_us()`` gives the means), or None when disabled.
+        """
+        self.profile = StepProfile() if enabled else None
+        return self.profile
+
+    def _step_profiled(self, actions: Any, profile: StepProfile) -> tuple:
+        """``step`` with each phase timed into ``profile`` (same numbers as ``step``)."""
+        marks = [now()]
+        actions = prepare_action(
+            actions, self.single_action_space, self.num_envs, self.invalid_action
+        )
+        workers = list(range(self.num_workers))
+        args = self._step_args(workers, actions)
+        marks.append(now())
+        handles = self._submit_all(workers, self._step_method, args)
+        marks.append(now())
+        self._backend.wait(handles, len(handles), None)
+        marks.append(now())
+        outcomes = self._backend.gather(workers, handles)
+        marks.append(now())
+        results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
+        out = self._join_results(workers, results)[:5]
+        marks.append(now())
+        timed = [o.value[6] for o in outcomes if o.ok and len(o.value) == 7]
+        profile.add(marks, timed)
+        return out
 
     @property
     def _step_method(self) -> str:
@@ -320,6 +363,8 @@ class WorkerVectorEnv(VectorEnv):
         if self._packed:
             data = actions.tobytes()
             row = len(data) // start
+            if self.profile is not None:  # ask the workers for their timings too
+                return [(data[a * row : b * row], True) for a, b in offsets]
             return [(data[a * row : b * row],) for a, b in offsets]
         return [(slice_batch(actions, a, b),) for a, b in offsets]
 
@@ -328,7 +373,7 @@ class WorkerVectorEnv(VectorEnv):
         lo, hi = self._slices[w]
         count = hi - lo
         if outcome.ok:
-            part, rew, term, trunc, infos, restarts = outcome.value
+            part, rew, term, trunc, infos, restarts = outcome.value[:6]
             if self._packed:
                 part, rew, term, trunc = self._unpack(part, rew, term, trunc, count)
                 infos = infos or [{}] * count

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import pickle
+import threading
+import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -34,6 +37,14 @@ def build_env(env_fn: EnvFactory | str, env_kwargs: dict[str, Any] | None = None
 
         return gym.make(env_fn, **(env_kwargs or {}))
     return env_fn()
+
+
+@dataclass
+class StepFailure:
+    """A step that raised inside a worker, returned as a value (see ``EnvGroup.step_seq``)."""
+
+    error: Exception
+    text: str
 
 
 @dataclass
@@ -71,6 +82,9 @@ class EnvGroup:
         self.pending_seeds: list[int | None] = [None] * n
         self.autoreset = np.zeros(n, dtype=np.bool_)
         self.last_obs: list[Any] = [None] * n
+        self._seq_lock = threading.Lock()  # step_seq: a compiled graph and a retry may race
+        self._seq: int | None = None
+        self._seq_answer: Any = None
 
     # -- introspection -----------------------------------------------------------------
     def spaces(self) -> tuple[gym.Space, gym.Space, dict[str, Any], str | None]:
@@ -192,20 +206,24 @@ class EnvGroup:
         self.autoreset = np.logical_or(terminations, truncations)
         return self._batch(self.last_obs), rewards, terminations, truncations, infos, restarts
 
-    def step_packed(self, action_bytes: bytes) -> tuple:
+    def step_packed(self, action_bytes: bytes, timed: bool = False) -> tuple:
         """``step`` for Box spaces with raw bytes in and out (cheaper to send than arrays).
 
         Returns (obs, rewards, terminations, truncations) as bytes, then the
-        infos (None when all are empty) and the restarts (None when none).
+        infos (None when all are empty) and the restarts (None when none). With
+        ``timed``, a 7th item: (seconds of (de)serialization, seconds in ``step``).
         """
+        start = time.perf_counter()
         space = self.single_action_space
         actions = (
             np.frombuffer(action_bytes, dtype=space.dtype)
             .reshape(len(self.envs), *space.shape)
             .copy()
         )
+        stepped = time.perf_counter()
         obs, rewards, terminations, truncations, infos, restarts = self.step(actions)
-        return (
+        computed = time.perf_counter()
+        out = (
             obs.tobytes(),
             rewards.tobytes(),
             terminations.tobytes(),
@@ -213,6 +231,32 @@ class EnvGroup:
             infos if any(infos) else None,
             restarts or None,
         )
+        if not timed:
+            return out
+        serde = stepped - start + time.perf_counter() - computed
+        return (*out, (serde, computed - stepped))
+
+    def step_seq(self, call: tuple[Any, ...]) -> Any:
+        """``step_packed(*call[1:])`` once per sequence number ``call[0]``.
+
+        A repeated number returns the answer already computed (or waits for it):
+        after a compiled-graph read was lost, the driver asks again by plain
+        actor call without stepping twice. Errors come back as a StepFailure.
+        Infos come pickled: arrays read from a compiled graph's channel would be
+        views on its buffer and block its next write while the driver holds them.
+        """
+        seq, *args = call
+        with self._seq_lock:
+            if seq != self._seq:
+                self._seq = seq
+                try:
+                    answer = self.step_packed(*args)
+                    if answer[4] is not None:
+                        answer = (*answer[:4], pickle.dumps(answer[4]), *answer[5:])
+                    self._seq_answer = answer
+                except Exception as error:
+                    self._seq_answer = StepFailure(error, traceback.format_exc())
+            return self._seq_answer
 
     def _restart_in_step(self, j: int) -> tuple[Any, dict[str, Any]]:
         final_obs = self.last_obs[j]

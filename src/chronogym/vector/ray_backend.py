@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import socket
 import time
 import traceback
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 from chronogym.vector.driver import Outcome
 from chronogym.vector.group import DisabledAutoresetError, EnvGroup
+
+logger = logging.getLogger("chronogym")
 
 
 def _check_reachable(address: str, timeout: float = 5.0) -> None:
@@ -53,6 +57,32 @@ def ensure_ray(address: str | None = None) -> None:
         ray.init(address=address, log_to_driver=True)
     else:
         ray.init(include_dashboard=False, log_to_driver=True)
+
+
+#: Seconds to wait before each new try of a replacement worker that died before it was ready.
+REPLACE_BACKOFF_S: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)
+
+
+def start_with_retries(
+    create: Callable[[], Any],
+    wait_ready: Callable[[Any], None],
+    errors: tuple[type[BaseException], ...] = (RuntimeError,),
+) -> Any:
+    """Create an actor and wait until it is ready; if it dies first, try again after
+    ``REPLACE_BACKOFF_S`` pauses. A node that was just killed still looks alive to Ray for a
+    few seconds, and a replacement placed there dies with it; a worker whose envs cannot be
+    built fails every try and the last error is raised."""
+    for pause in (*REPLACE_BACKOFF_S, None):
+        actor = create()
+        try:
+            wait_ready(actor)
+            return actor
+        except errors as error:
+            if pause is None:
+                raise
+            logger.warning("replacement worker died before it was ready (%s); retrying", error)
+            time.sleep(pause)
+    raise AssertionError("unreachable")
 
 
 def cluster_cpus() -> float:
@@ -122,6 +152,19 @@ def check_worker_gpus(num_gpus: float, num_workers: int) -> float:
     return float(num_gpus)
 
 
+#: Values of the ``scheduling`` option of RayVectorEnv and run_parallel_study.
+SCHEDULING = ("default", "spread")
+
+
+def actor_scheduling(scheduling: str) -> dict[str, str]:
+    """Actor options for ``scheduling``: ``"default"`` (Ray packs actors, nothing is
+    passed) or ``"spread"`` (``scheduling_strategy="SPREAD"``: over as many nodes as
+    possible)."""
+    if scheduling not in SCHEDULING:
+        raise ValueError(f"scheduling={scheduling!r}: expected one of {SCHEDULING}")
+    return {} if scheduling == "default" else {"scheduling_strategy": "SPREAD"}
+
+
 class RayBackend:
     """One Ray actor per worker, each owning an EnvGroup for its whole life."""
 
@@ -131,12 +174,17 @@ class RayBackend:
         num_gpus: float,
         start_timeout: float,
         step_timeout: float | None,
+        scheduling: str = "default",
     ) -> None:
         import ray
 
         self._ray = ray
         self._actor_cls = ray.remote(EnvGroup).options(
-            num_cpus=num_cpus, num_gpus=num_gpus, max_restarts=0, max_task_retries=0
+            num_cpus=num_cpus,
+            num_gpus=num_gpus,
+            max_restarts=0,
+            max_task_retries=0,
+            **actor_scheduling(scheduling),
         )
         self.start_timeout = start_timeout
         self.step_timeout = step_timeout
@@ -169,8 +217,9 @@ class RayBackend:
     def replace(self, worker: int, kwargs: dict[str, Any]) -> None:
         with contextlib.suppress(Exception):  # already dead
             self._ray.kill(self.actors[worker], no_restart=True)
-        actor = self._actor_cls.remote(**kwargs)
-        self._wait_ready([actor])
+        actor = start_with_retries(
+            lambda: self._actor_cls.remote(**kwargs), lambda new: self._wait_ready([new])
+        )
         self.actors[worker] = actor
         self._pids[worker] = None
 

@@ -8,15 +8,19 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
+from chronogym.vector.compiled_backend import CompiledRayBackend
 from chronogym.vector.driver import WorkerVectorEnv, normalize_env_fns
 from chronogym.vector.group import EnvFactory
 from chronogym.vector.ray_backend import (
     RayBackend,
+    actor_scheduling,
     check_worker_gpus,
     cluster_cpus,
     ensure_ray,
     resolve_worker_cpus,
 )
+
+TRANSPORTS = ("actor", "compiled")
 
 
 class RayVectorEnv(WorkerVectorEnv):
@@ -33,6 +37,9 @@ class RayVectorEnv(WorkerVectorEnv):
             ``num_cpus``: the cluster's CPUs shared evenly, at most 1 each.
         address: Ray cluster address; default ``RAY_ADDRESS``, else a local
             cluster is started (no dashboard).
+        scheduling: ``"default"`` (Ray's own placement: nodes with room,
+            the driver's first) or ``"spread"`` (``scheduling_strategy="SPREAD"``: the
+            workers go to as many nodes as possible).
         autoreset_mode: Gymnasium's ``AutoresetMode`` (NEXT_STEP default).
         max_restarts: restarts allowed per env before WorkerCrashLoopError
             (-1: no limit).
@@ -41,6 +48,12 @@ class RayVectorEnv(WorkerVectorEnv):
             treated as lost and replaced (default: wait forever).
         env_kwargs: keyword arguments for ``gymnasium.make`` when ``env_fns``
             is an id.
+        transport: how the barrier ``step`` reaches the workers: ``"actor"``
+            (default: one plain Ray actor call per worker) or ``"compiled"`` (one
+            Ray Compiled Graph over every worker, shared-memory channels; its
+            actors poll, using CPU while idle, so it pays off only with spare
+            cores; see ``benchmarks/README.md``). Box spaces only; other calls,
+            ``send`` / ``recv`` included, always use plain actor calls.
 
     ``step`` is one barrier over every worker. For algorithms that tolerate it,
     stepping can also be asynchronous (EnvPool-style):
@@ -79,14 +92,19 @@ class RayVectorEnv(WorkerVectorEnv):
         num_cpus: float | None = None,
         num_gpus: float = 0,
         address: str | None = None,
+        scheduling: str = "default",
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
         max_restarts: int = 3,
         invalid_action: str = "raise",
         step_timeout: float | None = None,
         start_timeout: float = 120.0,
         env_kwargs: dict[str, Any] | None = None,
+        transport: str = "actor",
     ) -> None:
         count = len(normalize_env_fns(env_fns, num_envs))
+        if transport not in TRANSPORTS:
+            raise ValueError(f"transport={transport!r}: expected one of {TRANSPORTS}")
+        self.transport = transport
         if envs_per_worker is not None and (
             isinstance(envs_per_worker, bool)
             or not isinstance(envs_per_worker, int)
@@ -98,6 +116,7 @@ class RayVectorEnv(WorkerVectorEnv):
             )
         if step_timeout is not None and not step_timeout > 0:
             raise ValueError(f"step_timeout={step_timeout!r}: expected None or seconds > 0")
+        actor_scheduling(scheduling)  # validate before starting Ray
         ensure_ray(address)
         if envs_per_worker is None:
             cpus = max(1, int(cluster_cpus()))
@@ -105,8 +124,12 @@ class RayVectorEnv(WorkerVectorEnv):
         num_workers = math.ceil(count / envs_per_worker)
         self.num_cpus_per_worker = resolve_worker_cpus(num_cpus, num_workers)
         self.num_gpus_per_worker = check_worker_gpus(num_gpus, num_workers)
-        backend = RayBackend(
-            self.num_cpus_per_worker, self.num_gpus_per_worker, start_timeout, step_timeout
+        backend = (CompiledRayBackend if transport == "compiled" else RayBackend)(
+            self.num_cpus_per_worker,
+            self.num_gpus_per_worker,
+            start_timeout,
+            step_timeout,
+            scheduling=scheduling,
         )
         super().__init__(
             env_fns,

@@ -1,0 +1,212 @@
+"""A real 3-node Ray cluster (``ray start`` head + 2 worker nodes on loopback): the same
+numbers as serial runs, with the workers spread over nodes."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from chronogym.cluster import LocalCluster, ray_start_available
+
+_UNAVAILABLE = ray_start_available()
+pytestmark = pytest.mark.skipif(
+    _UNAVAILABLE is not None, reason=f"`ray start` unavailable: {_UNAVAILABLE}"
+)
+
+GO1 = "chronogym/Go1Velocity-v0"
+TIMING_COLUMNS = ("wall_time", "collect_s", "learn_s")
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """Head + 2 worker nodes, 1 CPU each; this process is the driver.
+
+    A Ray already initialized by other tests (the session's local cluster) is
+    shut down first and started again afterwards, as conftest.py starts it.
+    """
+    import ray
+
+    was_local = ray.is_initialized()
+    if was_local:
+        ray.shutdown()
+    with LocalCluster(workers=2, num_cpus=1) as local:
+        local.connect()
+        yield local
+        local.disconnect()
+    if was_local:
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+
+
+def go1_rollout(vec, steps: int, seed: int = 5) -> list[np.ndarray]:
+    """Every array a seeded random-action rollout produces, in order."""
+    obs, _ = vec.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    arrays = [obs]
+    for _ in range(steps):
+        actions = rng.uniform(-1.0, 1.0, (vec.num_envs, 12)).astype(np.float32)
+        obs, rewards, terminated, truncated, _ = vec.step(actions)
+        arrays += [obs, rewards, terminated, truncated]
+    return arrays
+
+
+def test_cluster_has_three_live_nodes(cluster):
+    import ray
+
+    alive = [node for node in ray.nodes() if node["Alive"]]
+    assert len(alive) == 3
+    assert ray.cluster_resources()["CPU"] == 3.0
+    assert {f"node_{k}" for k in range(3)} <= set(ray.cluster_resources())
+    with pytest.raises(ValueError, match="is the head"):
+        cluster.kill_node("node_0")
+    with pytest.raises(ValueError, match="name='node_9'"):
+        cluster.kill_node("node_9")
+
+
+def test_spread_workers_on_distinct_nodes_match_serial(cluster):
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+    from chronogym.vector.serial import SerialVectorEnv
+
+    vec = RayVectorEnv(
+        GO1,
+        6,
+        envs_per_worker=2,
+        num_cpus=0.5,
+        address=cluster.address,
+        scheduling="spread",
+    )
+    try:
+        nodes = [cluster.node_of_pid(pid) for pid in vec.worker_pids()]
+        distributed = go1_rollout(vec, steps=60)
+    finally:
+        vec.close()
+    assert None not in nodes, f"worker pids not found under any node: {nodes}"
+    assert len(set(nodes)) >= 2, f"spread placement put every worker on {nodes}"
+    serial = SerialVectorEnv(GO1, 6)
+    try:
+        reference = go1_rollout(serial, steps=60)
+    finally:
+        serial.close()
+    assert len(distributed) == len(reference)
+    for got, want in zip(distributed, reference, strict=True):
+        assert got.dtype == want.dtype
+        assert got.tobytes() == want.tobytes()
+
+
+def test_bad_scheduling_is_rejected_by_name(cluster):
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+
+    with pytest.raises(ValueError, match="scheduling='packed'"):
+        RayVectorEnv(GO1, 2, address=cluster.address, scheduling="packed")
+
+
+def read_progress(path) -> list[dict[str, float]]:
+    with open(path) as handle:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+
+
+def assert_same_rows(got_rows: list[dict], want_rows: list[dict]) -> None:
+    """progress.csv rows equal in every column but the timings (NaN equals NaN)."""
+    assert len(got_rows) == len(want_rows)
+    for got, want in zip(got_rows, want_rows, strict=True):
+        for key in set(want) - set(TIMING_COLUMNS):
+            same = got[key] == want[key] or (math.isnan(got[key]) and math.isnan(want[key]))
+            assert same, f"{key}: {got[key]} on the cluster, {want[key]} serial"
+
+
+def test_train_quadruped_on_the_cluster_matches_serial(cluster, tmp_path):
+    import torch
+
+    from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
+
+    def run(backend: str, address: str | None):
+        cfg = quadruped_train_config(num_steps_per_env=16, save_interval=100)
+        out = tmp_path / backend
+        result = train_quadruped(
+            out,
+            num_envs=4,
+            backend=backend,
+            iterations=2,
+            seed=3,
+            address=address,
+            train_cfg=cfg,
+            progress=False,
+        )
+        state = torch.load(result.checkpoint, map_location="cpu", weights_only=True)
+        return read_progress(result.csv_path), state["actor_state_dict"]
+
+    ray_rows, ray_actor = run("ray", cluster.address)
+    serial_rows, serial_actor = run("serial", None)
+    assert [r["iteration"] for r in ray_rows] == [0.0, 1.0]
+    assert [r["env_steps"] for r in ray_rows] == [64.0, 128.0]
+    assert_same_rows(ray_rows, serial_rows)
+    # the strongest check: PPO saw the same data, so the updated weights are identical
+    assert ray_actor.keys() == serial_actor.keys()
+    for name, tensor in ray_actor.items():
+        assert torch.equal(tensor, serial_actor[name]), name
+
+
+def test_short_episodes_give_the_same_rewards_on_the_cluster(cluster, tmp_path):
+    """8-step episodes, so progress.csv holds real episode rewards and tracking errors
+    (the 1000-step episodes above never end in 2 short iterations: those columns are NaN)."""
+    from chronogym.rl.quadruped import make_quadruped_vec_env, quadruped_train_config
+    from chronogym.rl.trainer import train
+    from chronogym.rl.vecenv import RslRlVecEnv
+
+    def run(backend: str, address: str | None) -> list[dict[str, float]]:
+        extra = {"address": address} if address else {}
+        vec = make_quadruped_vec_env(4, backend, env_kwargs={"max_episode_steps": 8}, **extra)
+        env = RslRlVecEnv(vec, seed=3)
+        try:
+            cfg = quadruped_train_config(num_steps_per_env=16, save_interval=100)
+            result = train(
+                env, tmp_path / backend, iterations=2, train_cfg=cfg, seed=3, progress=False
+            )
+        finally:
+            env.close()
+        return read_progress(result.csv_path)
+
+    ray_rows = run("ray", cluster.address)
+    serial_rows = run("serial", None)
+    assert all(math.isfinite(row["mean_reward"]) for row in ray_rows)
+    assert_same_rows(ray_rows, serial_rows)
+
+
+def lander_study(tmp_path, name: str, workers: int, backend: str, address: str | None):
+    import optuna
+
+    from chronogym.optim import open_storage, run_parallel_study
+    from chronogym.optim.lander import LanderObjective, suggest_lander_design
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    # every trial is a startup trial: its design depends only on the seed and its number,
+    # never on which worker answered first
+    sampler = optuna.samplers.TPESampler(seed=7, n_startup_trials=6, constant_liar=True)
+    study = optuna.create_study(
+        storage=open_storage(f"sqlite:///{tmp_path}/{name}.db"),
+        study_name=name,
+        sampler=sampler,
+    )
+    report = run_parallel_study(
+        study,
+        suggest_lander_design,
+        LanderObjective("rigid", seed=0),
+        6,
+        workers=workers,
+        backend=backend,
+        address=address,
+        scheduling="spread" if backend == "ray" else "default",
+        progress=False,
+    )
+    return report, {t.number: (t.params, t.value, t.state.name) for t in study.trials}
+
+
+def test_lander_study_on_the_cluster_matches_serial(cluster, tmp_path):
+    report, trials = lander_study(tmp_path, "cluster", 2, "ray", cluster.address)
+    _, reference = lander_study(tmp_path, "serial", 1, "serial", None)
+    assert report.completed == 6 and report.failed == 0
+    assert sorted(trials) == list(range(6))
+    assert all(state == "COMPLETE" for _, _, state in trials.values())
+    assert trials == reference
