@@ -16,6 +16,12 @@ TASKS: dict[str, str] = {
     "Go1Velocity-v0": "chronogym.tasks.quadruped.task:Go1VelocityTask",
 }
 
+# Tasks on an optional engine: registered all the same (the id resolves lazily), but
+# ``gymnasium.make`` raises an error naming the missing package and how to install it.
+OPTIONAL_TASKS: dict[str, str] = {
+    "ChronoCartPole-v0": "chronogym.tasks.chrono_cartpole:ChronoCartPoleTask",  # pychrono
+}
+
 
 def load_task_class(path: str) -> type[Task]:
     """Import ``"package.module:ClassName"`` and return the Task class."""
@@ -59,5 +65,5 @@ def register_task(env_id: str, task: str | type[Task], **default_kwargs: Any) ->
 
 def register_envs() -> None:
     """Register every task shipped with chronogym (idempotent)."""
-    for name, path in TASKS.items():
+    for name, path in {**TASKS, **OPTIONAL_TASKS}.items():
         register_task(f"{NAMESPACE}/{name}", path)
