@@ -8,7 +8,7 @@ Prints an aligned table and writes JSON (default ``benchmarks/results/throughput
     python benchmarks/throughput.py            # default sweep, < 4 min on 2 cores
     python benchmarks/throughput.py --quick    # smoke run, < 1 min
     python benchmarks/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
-    python benchmarks/throughput.py --transports actor compiled   # both RayVectorEnv transports
+    python benchmarks/throughput.py --transports actor socket   # several RayVectorEnv transports
     python benchmarks/throughput.py --breakdown   # one vector step split into phases (µs)
 
 Counting: ``steps/s`` counts env steps as Gymnasium does, including the autoreset
@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import inspect
 import json
 import math
 import os
@@ -52,14 +51,17 @@ from tqdm import tqdm
 
 import chronogym
 from chronogym.tasks.cartpole import CartPoleTask
+from chronogym.vector.ray_vector_env import default_transport
 
 ENV_ID = "chronogym/CartPole-v0"
 DT = 0.002
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "throughput.json"
 BREAKDOWN_OUT = DEFAULT_OUT.with_name("throughput_breakdown.json")
-TRANSPORT_BACKENDS = {"actor": "ray", "compiled": "ray-cg"}  # RayVectorEnv transport -> row
-VECTOR_BACKENDS = ("serial", "async", "ray", "ray-cg", "ray-async")
-DEFAULT_TRANSPORT = str(inspect.signature(chronogym.RayVectorEnv).parameters["transport"].default)
+# RayVectorEnv transport -> row label
+TRANSPORT_BACKENDS = {"actor": "ray", "compiled": "ray-cg", "socket": "ray-sock"}
+BACKEND_TRANSPORTS = {row: transport for transport, row in TRANSPORT_BACKENDS.items()}
+VECTOR_BACKENDS = ("serial", "async", "ray", "ray-cg", "ray-sock", "ray-async")
+DEFAULT_TRANSPORT = default_transport()  # what RayVectorEnv(transport=None) uses
 RAW_MIN_SECONDS = 0.5  # shortest timing of the raw loop
 RAY_SETTLE_S = 2.0  # let a fresh Ray cluster's processes finish starting before timing
 
@@ -148,9 +150,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--transports",
         nargs="+",
         choices=tuple(TRANSPORT_BACKENDS),
-        default=[DEFAULT_TRANSPORT],
+        default=None,
         help=f"RayVectorEnv transports of the main sweep (default: {DEFAULT_TRANSPORT}, "
-        "RayVectorEnv's default); compiled rows are labelled ray-cg",
+        "RayVectorEnv's default) and of --breakdown (default: all); compiled rows are "
+        "labelled ray-cg, socket rows ray-sock",
     )
     parser.add_argument(
         "--breakdown",
@@ -185,6 +188,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.out is None:
         args.out = BREAKDOWN_OUT if args.breakdown else DEFAULT_OUT
+    if args.transports is None and not args.breakdown:
+        args.transports = [DEFAULT_TRANSPORT]
     if args.quick:
         args.seconds = min(args.seconds, 0.3)
         args.num_envs = [2, 8]
@@ -299,13 +304,13 @@ def make_vector_env(config: Config) -> gym.vector.VectorEnv:
         return chronogym.SerialVectorEnv(ENV_ID, config.num_envs, env_kwargs=env_kwargs)
     if config.backend == "async":
         return gym.make_vec(ENV_ID, config.num_envs, vectorization_mode="async", **env_kwargs)
-    if config.backend in ("ray", "ray-cg", "ray-async"):
+    if config.backend in ("ray", "ray-cg", "ray-sock", "ray-async"):
         return chronogym.RayVectorEnv(
             ENV_ID,
             config.num_envs,
             envs_per_worker=config.envs_per_worker,
             env_kwargs=env_kwargs,
-            transport="compiled" if config.backend == "ray-cg" else "actor",
+            transport=BACKEND_TRANSPORTS.get(config.backend, "actor"),
         )
     raise ValueError(f"backend={config.backend!r}: expected one of {VECTOR_BACKENDS}")
 
@@ -439,7 +444,7 @@ def vector_configs(
     ]
     for workers, per in ray_shapes(num_envs, one_per_worker):
         for transport in transports:
-            if transport == "actor" or per > 1 or num_envs == 1:
+            if transport != "compiled" or per > 1 or num_envs == 1:
                 configs.append(Config(TRANSPORT_BACKENDS[transport], num_envs, workers, per, level))
         if async_k and workers >= 2:
             configs.append(Config("ray-async", num_envs, workers, per, level, num_envs // 2))
@@ -781,7 +786,8 @@ def breakdown_plan(args: argparse.Namespace) -> list[tuple[str, int]]:
     """(transport, envs_per_worker) rows: serial, then each transport at each shape."""
     n = args.breakdown_envs
     pers = [p for p in args.breakdown_per_worker if 1 <= p <= n]
-    return [("serial", n)] + [(t, p) for t in TRANSPORT_BACKENDS for p in pers]
+    transports = args.transports or list(TRANSPORT_BACKENDS)
+    return [("serial", n)] + [(t, p) for t in transports for p in pers]
 
 
 BREAKDOWN_COLUMNS = (  # header, width, phase key or property
@@ -822,8 +828,9 @@ def format_breakdown(rows: list[Breakdown]) -> str:
 
 BREAKDOWN_NOTES = """\
 µs per vector step. Driver: prep = check actions + split into per-worker bytes; submit = the
-.remote() calls (compiled: the graph's execute); wait = the barrier (compiled: also reads and
-deserializes the answers); get = ray.get of the answers; join = unpack and join them.
+.remote() calls (compiled: the graph's execute; socket: the socket writes); wait = the barrier
+(compiled, socket: also reads and deserializes the answers); get = ray.get of the answers;
+join = unpack and join them.
 Workers (measured inside, slowest worker of each step): w-comp = time in the envs' step;
 w-serde = actions from bytes, results to bytes. call+xfer = wait - w-comp - w-serde: Ray's call
 and transfer, and waiting for a core. driver = prep + submit + get + join (the driver's own work).

@@ -11,6 +11,7 @@ with ``info["worker_restarted"] = True`` and the traceback in
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import pickle
 import threading
@@ -28,6 +29,17 @@ from gymnasium.vector.utils import concatenate, create_empty_array
 from chronogym.seeding import restart_seed
 
 EnvFactory = Callable[[], gym.Env]
+
+
+def locked(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Run ``method`` holding the group's lock: Ray calls and a socket thread take turns."""
+
+    @functools.wraps(method)
+    def run(self: EnvGroup, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return run
 
 
 def build_env(env_fn: EnvFactory | str, env_kwargs: dict[str, Any] | None = None) -> gym.Env:
@@ -82,6 +94,7 @@ class EnvGroup:
         self.pending_seeds: list[int | None] = [None] * n
         self.autoreset = np.zeros(n, dtype=np.bool_)
         self.last_obs: list[Any] = [None] * n
+        self._lock = threading.RLock()  # see locked(): a socket thread may serve steps
         self._seq_lock = threading.Lock()  # step_seq: a compiled graph and a retry may race
         self._seq: int | None = None
         self._seq_answer: Any = None
@@ -108,6 +121,20 @@ class EnvGroup:
     def ready(self) -> bool:
         return True
 
+    def open_socket(self, path: str, driver_node: str) -> bool:
+        """On ``driver_node``: serve the barrier step at Unix socket ``path`` (else False).
+
+        See :mod:`chronogym.vector.socket_backend` (``transport="socket"``).
+        """
+        import ray
+
+        if ray.get_runtime_context().get_node_id() != driver_node:
+            return False
+        from chronogym.vector.socket_backend import serve_socket
+
+        serve_socket(self, path)
+        return True
+
     # -- restarts ----------------------------------------------------------------------
     def _rebuild(self, j: int) -> int:
         with contextlib.suppress(Exception):  # a broken env may fail to close
@@ -116,12 +143,14 @@ class EnvGroup:
         self.restart_counts[j] += 1
         return restart_seed(self.seed_roots[j], self.indices[j], self.restart_counts[j])
 
+    @locked
     def mark_restarted(self, seeds: Sequence[int], last_obs: Sequence[Any]) -> None:
         """After the whole process was replaced: the next reset of each env uses ``seeds``."""
         self.pending_seeds = list(seeds)
         self.last_obs = list(last_obs)
         self.autoreset[:] = True
 
+    @locked
     def reset_restarted(
         self, seeds: Sequence[int], last_obs: Sequence[Any]
     ) -> tuple[Any, list[dict[str, Any]], list[Restart]]:
@@ -146,6 +175,7 @@ class EnvGroup:
         self.pending_seeds[j] = None
         return self.envs[j].reset(seed=seed, options=options)
 
+    @locked
     def reset(
         self,
         seeds: Sequence[int | None],
@@ -169,6 +199,7 @@ class EnvGroup:
             infos[j] = info
         return self._batch(self.last_obs), infos, restarts
 
+    @locked
     def step(
         self, actions: Any
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]], list[Restart]]:
@@ -206,6 +237,7 @@ class EnvGroup:
         self.autoreset = np.logical_or(terminations, truncations)
         return self._batch(self.last_obs), rewards, terminations, truncations, infos, restarts
 
+    @locked
     def step_packed(self, action_bytes: bytes, timed: bool = False) -> tuple:
         """``step`` for Box spaces with raw bytes in and out (cheaper to send than arrays).
 
@@ -268,6 +300,7 @@ class EnvGroup:
         return final_obs, {}
 
     # -- generic access ----------------------------------------------------------------
+    @locked
     def call(self, name: str, args: tuple[Any, ...], kwargs: dict[str, Any]) -> list[Any]:
         results = []
         for env in self.envs:
@@ -275,10 +308,12 @@ class EnvGroup:
             results.append(attr(*args, **kwargs) if callable(attr) else attr)
         return results
 
+    @locked
     def set_attr(self, name: str, values: Sequence[Any]) -> None:
         for env, value in zip(self.envs, values, strict=True):
             env.set_wrapper_attr(name, value)
 
+    @locked
     def close(self) -> None:
         for env in self.envs:
             env.close()

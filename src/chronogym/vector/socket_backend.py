@@ -1,0 +1,327 @@
+"""The ``transport="socket"`` backend: the barrier step over Unix domain sockets.
+
+Workers are the same Ray actors as with the plain transport, created and
+replaced by Ray. Once a worker is ready and runs on the driver's node, it
+serves a Unix socket in a private directory (``mkdtemp``, mode 0700: only
+this user can connect; nothing on the network) from a daemon thread. The
+barrier ``step`` of Box spaces then writes one message per worker (its action
+bytes) and reads each answer with blocking ``recv_into``: nobody polls, idle
+workers use no CPU. Everything else (reset, send / recv, call, workers on
+other nodes, non-Box spaces) uses plain actor calls.
+
+Messages: request = ``<I B`` (action byte count, timed flag) + action bytes;
+answer = ``<B 5I`` (status, then the lengths of obs, rewards, terminations,
+truncations and tail) + those parts back to back. Tail: pickled (infos,
+restarts[, timings]) when any is set, or a pickled StepFailure (status 1).
+
+Faults: EOF, a reset connection or ``step_timeout`` without an answer mark the
+worker lost; the driver replaces it as with the plain transport and the
+replacement's socket is connected again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import pickle
+import shutil
+import socket
+import struct
+import tempfile
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Any
+
+from chronogym.vector.compiled_backend import failure_outcome
+from chronogym.vector.driver import Outcome
+from chronogym.vector.group import EnvGroup, StepFailure
+from chronogym.vector.ray_backend import RayBackend
+
+STEP_METHOD = "step_packed"  # the driver's step method this backend sends over sockets
+REQUEST = struct.Struct("<IB")  # action byte count, timed flag
+ANSWER = struct.Struct("<BIIIII")  # status (0 ok, 1 failure), then 5 part lengths
+OK, FAILED = 0, 1
+ACCEPT_TIMEOUT_S = 30.0  # a worker stops listening if the driver never connects
+DEATH_PROBE_S = 10.0  # how long to ask Ray why a worker whose socket broke died
+
+logger = logging.getLogger("chronogym")
+
+
+# -- worker side ------------------------------------------------------------------------------
+def recv_exact(conn: socket.socket, view: memoryview) -> bool:
+    """Fill ``view`` from ``conn``; False on EOF before the first byte, error on a partial read."""
+    got = 0
+    while got < len(view):
+        n = conn.recv_into(view[got:])
+        if n == 0:
+            if got == 0:
+                return False
+            raise ConnectionResetError(f"peer closed after {got} of {len(view)} bytes")
+        got += n
+    return True
+
+
+def encode_answer(answer: Any) -> bytes:
+    """One answer of ``step_packed`` (or a StepFailure) as the bytes of an answer message."""
+    if isinstance(answer, StepFailure):
+        try:
+            tail = pickle.dumps(answer)
+        except Exception:  # an exception that cannot be pickled travels as its text
+            tail = pickle.dumps(StepFailure(RuntimeError(answer.text), answer.text))
+        return ANSWER.pack(FAILED, 0, 0, 0, 0, len(tail)) + tail
+    extra = answer[4:]
+    tail = pickle.dumps(extra) if any(x is not None for x in extra) else b""
+    parts = (*answer[:4], tail)
+    return ANSWER.pack(OK, *(len(p) for p in parts)) + b"".join(parts)
+
+
+def serve_socket(group: EnvGroup, path: str) -> None:
+    """Listen at ``path`` and answer ``group``'s barrier steps from a daemon thread."""
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    listener.bind(path)
+    listener.listen(1)
+    listener.settimeout(ACCEPT_TIMEOUT_S)
+    threading.Thread(target=_serve, args=(group, listener, path), daemon=True).start()
+
+
+def _serve(group: EnvGroup, listener: socket.socket, path: str) -> None:
+    """Accept the driver (once), then answer its step requests until it hangs up."""
+    try:
+        conn, _ = listener.accept()
+    except OSError:
+        return
+    finally:
+        listener.close()
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+    with conn:
+        conn.settimeout(None)
+        _serve_conn(group, conn)
+
+
+def _serve_conn(group: EnvGroup, conn: socket.socket) -> None:
+    head = bytearray(REQUEST.size)
+    data = bytearray(256)
+    while True:
+        try:
+            if not recv_exact(conn, memoryview(head)):
+                return
+            size, timed = REQUEST.unpack(head)
+            if size > len(data):
+                data = bytearray(size)
+            recv_exact(conn, memoryview(data)[:size])
+            conn.sendall(encode_answer(_step_bytes(group, bytes(data[:size]), bool(timed))))
+        except OSError:
+            return
+
+
+def _step_bytes(group: EnvGroup, action_bytes: bytes, timed: bool) -> Any:
+    """``group.step_packed`` (which holds the group's lock); an error as a StepFailure."""
+    try:
+        return group.step_packed(action_bytes, timed)
+    except Exception as error:
+        return StepFailure(error, traceback.format_exc())
+
+
+# -- driver side ------------------------------------------------------------------------------
+@dataclass
+class SockHandle:
+    """One worker's barrier step sent over its socket; ``outcome`` once read."""
+
+    worker: int
+    deadline: float | None
+    outcome: Outcome | None = None
+
+
+class SocketRayBackend(RayBackend):
+    """RayBackend whose barrier step goes over Unix sockets to workers on this node."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._dir: str | None = None
+        self._socks: list[socket.socket | None] = []
+        self._bufs: list[bytearray] = []
+        self._opened = 0  # sockets opened so far (unique file names)
+
+    # -- connections ----------------------------------------------------------------------
+    def start(self, group_kwargs: list[dict[str, Any]]) -> None:
+        super().start(group_kwargs)
+        self._dir = tempfile.mkdtemp(prefix="chronogym-")
+        os.chmod(self._dir, 0o700)
+        self._socks = [None] * len(self.actors)
+        self._bufs = [bytearray(4096) for _ in self.actors]
+        self._connect(list(range(len(self.actors))))
+
+    @property
+    def socket_dir(self) -> str | None:
+        """The private directory of the workers' sockets (None once shut down)."""
+        return self._dir
+
+    def connected(self) -> list[bool]:
+        """Which workers step over a socket (the others: plain actor calls)."""
+        return [s is not None for s in self._socks]
+
+    def _connect(self, workers: list[int]) -> None:
+        """Ask ``workers`` to listen (those on this node) and connect to them."""
+        if self._dir is None:
+            return
+        node = self._ray.get_runtime_context().get_node_id()
+        paths = {}
+        for w in workers:
+            self._opened += 1
+            paths[w] = os.path.join(self._dir, f"w{w}-{self._opened}.sock")
+        refs = {w: self.actors[w].open_socket.remote(paths[w], node) for w in workers}
+        for w in workers:
+            self._socks[w] = self._dial(refs[w], paths[w])
+
+    def _dial(self, listening: Any, path: str) -> socket.socket | None:
+        """A connection to the socket a worker opened; None (plain calls) if it could not."""
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            if not self._ray.get(listening, timeout=self.start_timeout):
+                sock.close()
+                return None  # another node: plain actor calls
+            sock.settimeout(self.start_timeout)
+            sock.connect(path)
+        except Exception as error:  # a worker that died now is found by its next plain call
+            logger.warning(
+                "chronogym: no socket to worker at %s (%s); using actor calls", path, error
+            )
+            sock.close()
+            return None
+        sock.settimeout(self.step_timeout)
+        return sock
+
+    def _disconnect(self, w: int) -> None:
+        sock, self._socks[w] = self._socks[w], None
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.close()
+
+    def replace(self, worker: int, kwargs: dict[str, Any]) -> None:
+        self._disconnect(worker)
+        super().replace(worker, kwargs)
+        self._connect([worker])
+
+    def shutdown(self) -> None:
+        for w in range(len(self._socks)):
+            self._disconnect(w)
+        super().shutdown()
+        if self._dir is not None:
+            shutil.rmtree(self._dir, ignore_errors=True)
+            self._dir = None
+
+    # -- the barrier step -----------------------------------------------------------------
+    def submit_all(self, workers: list[int], method: str, args: list[tuple[Any, ...]]) -> list:
+        """A barrier step goes over the sockets of connected workers; anything else, plain."""
+        if method != STEP_METHOD or workers != list(range(len(self.actors))):
+            return [self.submit(w, method, *a) for w, a in zip(workers, args, strict=True)]
+        deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
+        handles: list[Any] = []
+        for w, a in zip(workers, args, strict=True):
+            sock = self._socks[w]
+            if sock is None:
+                handles.append(self.submit(w, method, *a))
+                continue
+            handle = SockHandle(w, deadline)
+            data, timed = a[0], bool(a[1]) if len(a) > 1 else False
+            try:
+                sock.sendall(REQUEST.pack(len(data), timed) + data)
+            except OSError as error:
+                handle.outcome = self._lost(w, error)
+            handles.append(handle)
+        return handles
+
+    def _lost(self, w: int, error: BaseException) -> Outcome:
+        """Worker ``w``'s socket failed: the worker is lost (Ray's reason, when it has one)."""
+        self._disconnect(w)
+        if isinstance(error, TimeoutError):
+            message = f"no answer within step_timeout={self.step_timeout} s"
+        else:
+            message = (
+                f"{self._death_cause(w)}\n(worker {w}'s socket: {type(error).__name__}: {error})"
+            )
+        return Outcome(False, None, message, lost=True)
+
+    def _death_cause(self, w: int) -> str:
+        """Why Ray says worker ``w`` died (as the plain transport reports it)."""
+        try:
+            self._ray.get(self.actors[w].ready.remote(), timeout=DEATH_PROBE_S)
+        except Exception as error:
+            return f"{type(error).__name__}: {error}"
+        return "the worker's process is alive but its socket thread stopped"
+
+    def _resolve(self, handle: SockHandle) -> Outcome:
+        """Read ``handle``'s answer (once)."""
+        if handle.outcome is None:
+            w = handle.worker
+            try:
+                handle.outcome = self._read(w, handle.deadline)
+            except (OSError, EOFError) as error:
+                handle.outcome = self._lost(w, error)
+        return handle.outcome
+
+    def _read(self, w: int, deadline: float | None) -> Outcome:
+        """One answer from worker ``w``'s socket, with blocking ``recv_into``."""
+        sock = self._socks[w]
+        assert sock is not None
+        if deadline is not None:
+            sock.settimeout(max(deadline - time.monotonic(), 1e-3))
+        view = memoryview(self._bufs[w])
+        got = self._fill(sock, view, 0, ANSWER.size)
+        status, *sizes = ANSWER.unpack_from(view)
+        total = ANSWER.size + sum(sizes)
+        if total > len(view):  # grow the buffer, keeping what was read
+            bigger = bytearray(total)
+            bigger[:got] = view[:got]
+            self._bufs[w] = bigger
+            view = memoryview(bigger)
+        self._fill(sock, view, got, total)
+        return decode_answer(status, sizes, view)
+
+    @staticmethod
+    def _fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
+        """Read into ``view`` from ``got`` until at least ``need`` bytes are in; the count."""
+        while got < need:
+            n = sock.recv_into(view[got:])
+            if n == 0:
+                raise EOFError(f"the worker closed its socket after {got} of {need} bytes")
+            got += n
+        return got
+
+    def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]:
+        refs = [(k, h) for k, h in enumerate(handles) if not isinstance(h, SockHandle)]
+        outcomes: list[Outcome | None] = [
+            self._resolve(h) if isinstance(h, SockHandle) else None for h in handles
+        ]
+        if refs:
+            plain = super().gather([workers[k] for k, _ in refs], [h for _, h in refs])
+            for (k, _), outcome in zip(refs, plain, strict=True):
+                outcomes[k] = outcome
+        return outcomes  # type: ignore[return-value]
+
+    def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]:
+        if not any(isinstance(h, SockHandle) for h in handles):
+            return super().wait(handles, num_returns, timeout)
+        for h in handles:  # a barrier step: read every socket's answer
+            if isinstance(h, SockHandle):
+                self._resolve(h)
+        refs = [h for h in handles if not isinstance(h, SockHandle)]
+        if refs:
+            super().wait(refs, len(refs), timeout)
+        return list(range(len(handles)))
+
+
+def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
+    """An answer message as the Outcome the plain transport gives for the same answer."""
+    parts, at = [], ANSWER.size
+    for size in sizes:
+        parts.append(view[at : at + size])
+        at += size
+    if status == FAILED:
+        return failure_outcome(pickle.loads(parts[4]))  # trusted: own worker
+    extra = pickle.loads(parts[4]) if sizes[4] else (None, None)  # trusted: own worker
+    return Outcome(True, (*(bytes(p) for p in parts[:4]), *extra))

@@ -1,0 +1,156 @@
+"""RayVectorEnv transport="socket": same numbers, same fault handling, a private socket dir.
+
+Real Ray (2 CPUs), real MuJoCo cart-pole, real SIGKILLs.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import stat
+import time
+from functools import partial
+
+import numpy as np
+import pytest
+from faulty_tasks import FailingEnv
+from vector_rollouts import ENV_ID, vector_rollout
+
+from chronogym import RayVectorEnv, SerialVectorEnv
+
+NUM_ENVS = 4
+STEPS = 40
+KILL_AT = 15
+
+
+def assert_same_rollouts(got: list, want: list) -> None:
+    """Observations, rewards and flags identical, step by step."""
+    assert len(got) == len(want)
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a[0], b[0])
+        if len(a) == 5:
+            for k in (1, 2, 3):
+                np.testing.assert_array_equal(a[k], b[k])
+
+
+def socket_env(*args, **kwargs) -> RayVectorEnv:
+    vec = RayVectorEnv(*args, transport="socket", **kwargs)
+    assert all(vec._backend.connected()), "workers on the driver's node step over sockets"
+    return vec
+
+
+@pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
+def test_socket_matches_serial(ray_cluster, mode):
+    serial = vector_rollout(SerialVectorEnv(ENV_ID, NUM_ENVS, autoreset_mode=mode), 300)
+    vec = socket_env(ENV_ID, NUM_ENVS, envs_per_worker=2, autoreset_mode=mode)
+    try:
+        assert_same_rollouts(vector_rollout(vec, 300), serial)
+    finally:
+        vec.close()
+
+
+@pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
+def test_sigkilled_worker_is_replaced_and_reconnected(ray_cluster, mode):
+    undisturbed = vector_rollout(SerialVectorEnv(ENV_ID, NUM_ENVS, autoreset_mode=mode), STEPS)
+    vec = socket_env(ENV_ID, NUM_ENVS, envs_per_worker=2, autoreset_mode=mode)
+    try:
+        old_pids = vec.worker_pids()
+
+        def kill(t, v):
+            if t == KILL_AT:
+                os.kill(old_pids[1], signal.SIGKILL)
+                time.sleep(0.3)
+
+        run = vector_rollout(vec, STEPS, kill=kill)
+        new_pids = vec.worker_pids()
+        assert new_pids[0] == old_pids[0] and new_pids[1] != old_pids[1]
+        assert all(vec._backend.connected())  # the replacement serves a socket again
+        _, rewards, terminated, truncated, info = run[KILL_AT + 1]
+        assert truncated[2:].all() and not terminated[2:].any() and (rewards[2:] == 0).all()
+        assert info["worker_restarted"][2:].all() and not info["_worker_restarted"][:2].any()
+        assert "ActorDiedError" in info["worker_error"][2] and "socket" in info["worker_error"][2]
+        if mode == "SameStep":
+            np.testing.assert_array_equal(info["final_obs"][2], run[KILL_AT][0][2])
+        assert [i for i, _ in vec.restarts] == [2, 3]
+        for got, want in zip(run, undisturbed, strict=True):  # the other worker: unaffected
+            np.testing.assert_array_equal(got[0][:2], want[0][:2])
+        assert np.isfinite(run[-1][0]).all()
+    finally:
+        vec.close()
+
+
+def test_env_exception_comes_back_with_its_infos(ray_cluster):
+    seed = 11
+    fns = [partial(FailingEnv, fail_seed=seed + 1 if i == 1 else None) for i in range(3)]
+    undisturbed = vector_rollout(SerialVectorEnv([partial(FailingEnv, None)] * 3), 20, seed)
+    vec = socket_env(fns, envs_per_worker=3)
+    try:
+        run = vector_rollout(vec, 20, seed)
+        _, _, _, truncated, info = run[5]  # FailingCartPole raises at its 5th step
+        assert truncated.tolist() == [False, True, False]
+        assert "injected failure at step 5" in info["worker_error"][1]
+        assert vec.restarts[0][0] == 1
+        for got, want in zip(run, undisturbed, strict=True):
+            np.testing.assert_array_equal(got[0][[0, 2]], want[0][[0, 2]])
+    finally:
+        vec.close()
+
+
+def test_hung_worker_is_replaced_after_step_timeout(ray_cluster):
+    from faulty_tasks import HangingCartPole
+
+    from chronogym import SimEnv
+
+    vec = socket_env(
+        [partial(SimEnv, HangingCartPole(hang_at=3)), partial(SimEnv, HangingCartPole(hang_at=0))],
+        envs_per_worker=1,
+        step_timeout=2.0,
+    )
+    try:
+        vec.reset(seed=0)
+        actions = np.zeros((2, 1), dtype=np.float32)
+        vec.step(actions)
+        vec.step(actions)
+        start = time.perf_counter()
+        _, _, _, truncated, info = vec.step(actions)  # env 0 hangs here
+        assert time.perf_counter() - start < 30
+        assert truncated.tolist() == [True, False]
+        assert "step_timeout=2.0" in info["worker_error"][0]
+        _, _, _, truncated, _ = vec.step(actions)  # over the replacement's socket
+        assert not truncated.any() and all(vec._backend.connected())
+    finally:
+        vec.close()
+
+
+def test_socket_dir_is_private_and_removed_on_close(ray_cluster):
+    vec = socket_env(ENV_ID, 2, envs_per_worker=1)
+    directory = vec._backend.socket_dir
+    try:
+        assert stat.S_IMODE(os.stat(directory).st_mode) == 0o700
+        assert os.listdir(directory) == []  # each worker unlinks its socket once connected
+    finally:
+        vec.close()
+    assert not os.path.exists(directory)
+
+
+def test_profile_and_send_recv_fall_back_to_actor_calls(ray_cluster):
+    vec = socket_env(ENV_ID, NUM_ENVS, envs_per_worker=2)
+    try:
+        profile = vec.profile_steps()
+        vector_rollout(vec, 10)
+        times = profile.per_step_us()
+        assert profile.steps == 10 and times["compute"] > 0 and times["wait"] > 0
+        vec.profile_steps(enabled=False)
+        vec.send(np.zeros((NUM_ENVS, 1), dtype=np.float32))  # plain actor calls
+        obs, *_, ids = vec.recv()
+        assert ids.tolist() == list(range(NUM_ENVS)) and np.isfinite(obs).all()
+        obs, *_ = vec.step(np.zeros((NUM_ENVS, 1), dtype=np.float32))  # back on the sockets
+        assert np.isfinite(obs).all()
+        assert len(vec.get_attr("dt")) == NUM_ENVS
+    finally:
+        vec.close()
+
+
+def test_bogus_transport_is_a_value_error():
+    with pytest.raises(ValueError, match=r"transport='bogus': expected one of .*'socket'"):
+        RayVectorEnv(ENV_ID, 2, transport="bogus")
