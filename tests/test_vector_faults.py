@@ -97,7 +97,8 @@ def test_crash_loop_becomes_a_clear_error():
             vec.step(actions)
 
 
-def test_hung_worker_is_replaced_after_step_timeout(ray_cluster):
+@pytest.mark.parametrize("transport", ["actor", "socket", "compiled"])
+def test_hung_worker_is_replaced_after_step_timeout(ray_cluster, transport):
     from faulty_tasks import HangingCartPole
 
     from chronogym import SimEnv
@@ -106,6 +107,7 @@ def test_hung_worker_is_replaced_after_step_timeout(ray_cluster):
         [partial(SimEnv, HangingCartPole(hang_at=3)), partial(SimEnv, HangingCartPole(hang_at=0))],
         envs_per_worker=1,
         step_timeout=2.0,
+        transport=transport,
     )
     vec.reset(seed=0)
     actions = np.zeros((2, 1), dtype=np.float32)
@@ -118,4 +120,6 @@ def test_hung_worker_is_replaced_after_step_timeout(ray_cluster):
     assert "step_timeout=2.0" in info["worker_error"][0]
     _, _, _, truncated, _ = vec.step(actions)  # the replacement answers: NEXT_STEP resets env 0
     assert not truncated.any()
+    if transport == "socket":  # the replacement serves a socket again
+        assert all(vec._backend.connected())
     vec.close()

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import time
+
 import numpy as np
 
 ENV_ID = "chronogym/CartPole-v0"
@@ -43,3 +47,24 @@ def single_env_rollouts(make_env, num_envs: int, steps: int, seed: int = 11) -> 
                 done = term or trunc
         per_env.append(rows)
     return per_env
+
+
+def assert_same_rollouts(got: list, want: list) -> None:
+    """Observations, rewards and flags identical, step by step."""
+    assert len(got) == len(want)
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a[0], b[0])
+        if len(a) == 5:
+            for k in (1, 2, 3):
+                np.testing.assert_array_equal(a[k], b[k])
+
+
+def kill_at(pid: int, step: int):
+    """A ``kill`` for :func:`vector_rollout`: SIGKILL ``pid`` just before step ``step``."""
+
+    def kill(t, vec) -> None:
+        if t == step:
+            os.kill(pid, signal.SIGKILL)
+            time.sleep(0.3)
+
+    return kill

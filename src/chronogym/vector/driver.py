@@ -316,7 +316,7 @@ class WorkerVectorEnv(VectorEnv):
         workers = list(range(self.num_workers))
         outcomes = self._call_all(workers, self._step_method, self._step_args(workers, actions))
         results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
-        return self._join_results(workers, results)[:5]
+        return self._join_results(workers, results)
 
     def profile_steps(self, enabled: bool = True) -> StepProfile | None:
         """Time every following ``step`` phase by phase (``enabled=False``: stop).
@@ -343,7 +343,7 @@ class WorkerVectorEnv(VectorEnv):
         outcomes = self._backend.gather(workers, handles)
         marks.append(now())
         results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
-        out = self._join_results(workers, results)[:5]
+        out = self._join_results(workers, results)
         marks.append(now())
         timed = [o.value[6] for o in outcomes if o.ok and len(o.value) == 7]
         profile.add(marks, timed)
@@ -503,7 +503,8 @@ class WorkerVectorEnv(VectorEnv):
         workers = sorted(outcomes)
         calls = {w: self._pending.pop(w) for w in workers}
         results = [self._pending_result(w, calls[w], outcomes[w]) for w in workers]
-        return self._join_results(workers, results)
+        env_ids = np.concatenate([np.arange(*self._slices[w], dtype=np.int64) for w in workers])
+        return (*self._join_results(workers, results), env_ids)
 
     def _check_idle(self, what: str) -> None:
         if self._pending:
@@ -609,7 +610,7 @@ class WorkerVectorEnv(VectorEnv):
         return batch_infos(infos_per_env)
 
     def _join_results(self, workers: list[int], results: list[StepPart]) -> tuple:
-        """(obs, rewards, terminations, truncations, infos, env_ids) of ``workers``, in order."""
+        """(obs, rewards, terminations, truncations, infos) of ``workers``, in order."""
         space = self.single_observation_space
         return (
             concat_batches(space, [r.obs for r in results]),
@@ -617,7 +618,6 @@ class WorkerVectorEnv(VectorEnv):
             np.concatenate([r.terminations for r in results]).astype(np.bool_, copy=False),
             np.concatenate([r.truncations for r in results]).astype(np.bool_, copy=False),
             batch_infos([info for r in results for info in r.infos]),
-            np.concatenate([np.arange(*self._slices[w], dtype=np.int64) for w in workers]),
         )
 
     # -- generic access ----------------------------------------------------------------

@@ -238,7 +238,7 @@ class EnvGroup:
         return self._batch(self.last_obs), rewards, terminations, truncations, infos, restarts
 
     @locked
-    def step_packed(self, action_bytes: bytes, timed: bool = False) -> tuple:
+    def step_packed(self, action_bytes: bytes | memoryview, timed: bool = False) -> tuple:
         """``step`` for Box spaces with raw bytes in and out (cheaper to send than arrays).
 
         Returns (obs, rewards, terminations, truncations) as bytes, then the

@@ -51,17 +51,15 @@ logger = logging.getLogger("chronogym")
 
 
 # -- worker side ------------------------------------------------------------------------------
-def recv_exact(conn: socket.socket, view: memoryview) -> bool:
-    """Fill ``view`` from ``conn``; False on EOF before the first byte, error on a partial read."""
-    got = 0
-    while got < len(view):
-        n = conn.recv_into(view[got:])
+def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
+    """Read into ``view`` from ``got`` until at least ``need`` bytes are in; the count.
+    EOFError when the peer closes first (both sides use it)."""
+    while got < need:
+        n = sock.recv_into(view[got:])
         if n == 0:
-            if got == 0:
-                return False
-            raise ConnectionResetError(f"peer closed after {got} of {len(view)} bytes")
+            raise EOFError(f"the peer closed its socket after {got} of {need} bytes")
         got += n
-    return True
+    return got
 
 
 def encode_answer(answer: Any) -> bytes:
@@ -103,22 +101,22 @@ def _serve(group: EnvGroup, listener: socket.socket, path: str) -> None:
 
 
 def _serve_conn(group: EnvGroup, conn: socket.socket) -> None:
-    head = bytearray(REQUEST.size)
-    data = bytearray(256)
+    """Answer step requests until the driver hangs up (EOF) or the connection fails."""
+    head = memoryview(bytearray(REQUEST.size))
+    data = memoryview(bytearray(256))
     while True:
         try:
-            if not recv_exact(conn, memoryview(head)):
-                return
+            fill(conn, head, 0, REQUEST.size)
             size, timed = REQUEST.unpack(head)
             if size > len(data):
-                data = bytearray(size)
-            recv_exact(conn, memoryview(data)[:size])
-            conn.sendall(encode_answer(_step_bytes(group, bytes(data[:size]), bool(timed))))
-        except OSError:
+                data = memoryview(bytearray(size))
+            fill(conn, data, 0, size)
+            conn.sendall(encode_answer(_step_bytes(group, data[:size], bool(timed))))
+        except (OSError, EOFError):
             return
 
 
-def _step_bytes(group: EnvGroup, action_bytes: bytes, timed: bool) -> Any:
+def _step_bytes(group: EnvGroup, action_bytes: memoryview, timed: bool) -> Any:
     """``group.step_packed`` (which holds the group's lock); an error as a StepFailure."""
     try:
         return group.step_packed(action_bytes, timed)
@@ -271,7 +269,7 @@ class SocketRayBackend(RayBackend):
         if deadline is not None:
             sock.settimeout(max(deadline - time.monotonic(), 1e-3))
         view = memoryview(self._bufs[w])
-        got = self._fill(sock, view, 0, ANSWER.size)
+        got = fill(sock, view, 0, ANSWER.size)
         status, *sizes = ANSWER.unpack_from(view)
         total = ANSWER.size + sum(sizes)
         if total > len(view):  # grow the buffer, keeping what was read
@@ -279,18 +277,8 @@ class SocketRayBackend(RayBackend):
             bigger[:got] = view[:got]
             self._bufs[w] = bigger
             view = memoryview(bigger)
-        self._fill(sock, view, got, total)
+        fill(sock, view, got, total)
         return decode_answer(status, sizes, view)
-
-    @staticmethod
-    def _fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
-        """Read into ``view`` from ``got`` until at least ``need`` bytes are in; the count."""
-        while got < need:
-            n = sock.recv_into(view[got:])
-            if n == 0:
-                raise EOFError(f"the worker closed its socket after {got} of {need} bytes")
-            got += n
-        return got
 
     def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]:
         refs = [(k, h) for k, h in enumerate(handles) if not isinstance(h, SockHandle)]
