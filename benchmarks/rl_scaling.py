@@ -44,26 +44,30 @@ def parse_config(name: str) -> tuple[str, int]:
 def run_config(
     name: str, minutes: float, out: Path, runs: Path, seed: int, **train_kwargs: object
 ) -> dict:
-    """Train one configuration (``train_kwargs`` go to ``train_quadruped``); its summary."""
-    from chronogym.rl.quadruped import train_quadruped
+    """Train one configuration (``train_kwargs`` go to ``train_quadruped``, e.g. ``resume``);
+    its summary. Iterations and env steps count this run only, also when it resumes."""
+    from chronogym.rl.quadruped import QUADRUPED_PPO, train_quadruped
 
     backend, num_envs = parse_config(name)
+    shutil.rmtree(runs / name, ignore_errors=True)  # a fresh progress.csv for the figure
     result = train_quadruped(
         runs / name, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed, **train_kwargs
     )
     csv_path = out / f"{name}.csv"
     shutil.copyfile(result.csv_path, csv_path)
     rows = read_rows(csv_path)
+    steps = len(rows) * num_envs * QUADRUPED_PPO["num_steps_per_env"]
     return {
         "config": name,
         "backend": backend,
         "num_envs": num_envs,
-        "iterations": result.iterations_done,
-        "env_steps": result.env_steps,
+        "iterations": len(rows),
+        "env_steps": steps,
         "wall_time": result.wall_time,
-        "env_steps_per_s": result.env_steps / result.wall_time if result.wall_time else math.nan,
+        "env_steps_per_s": steps / result.wall_time if result.wall_time else math.nan,
         "final": rows[-1] if rows else {},
         "csv": csv_path.name,
+        "checkpoint": str(result.checkpoint),
     }
 
 

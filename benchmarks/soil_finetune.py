@@ -25,10 +25,9 @@ import json
 import math
 import os
 import platform
-import shutil
 from pathlib import Path
 
-from rl_scaling import parse_config, plot, print_table, read_rows  # this script's folder
+from rl_scaling import parse_config, plot, print_table, run_config  # this script's folder
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "soil_finetune"
 DEFAULT_RUNS = Path("runs") / "soil_finetune"  # checkpoints and TensorBoard events
@@ -47,35 +46,6 @@ def rigid_checkpoint(path: Path, minutes: float, seed: int) -> Path:
     print(f"== no rigid checkpoint at {path}: training one for {minutes:g} min (serial, 32 envs)")
     result = train_quadruped(path.parent, num_envs=32, backend="serial", minutes=minutes, seed=seed)
     return Path(result.checkpoint)
-
-
-def finetune(name: str, checkpoint: Path, minutes: float, out: Path, runs: Path, seed: int):
-    """Fine-tune one configuration on soil; its summary (env steps of this run only)."""
-    from chronogym.rl.quadruped import QUADRUPED_PPO, train_quadruped
-
-    backend, num_envs = parse_config(name)
-    run_dir = runs / name
-    shutil.rmtree(run_dir, ignore_errors=True)  # fresh progress.csv for the figure
-    result = train_quadruped(
-        run_dir, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed,
-        resume=checkpoint, terrain="soil", finetune=True,
-    )  # fmt: skip
-    csv_path = out / f"{name}.csv"
-    shutil.copyfile(result.csv_path, csv_path)
-    rows = read_rows(csv_path)
-    steps = len(rows) * num_envs * QUADRUPED_PPO["num_steps_per_env"]
-    return {
-        "config": name,
-        "backend": backend,
-        "num_envs": num_envs,
-        "iterations": len(rows),
-        "env_steps": steps,
-        "wall_time": result.wall_time,
-        "env_steps_per_s": steps / result.wall_time if result.wall_time else math.nan,
-        "final": rows[-1] if rows else {},
-        "csv": csv_path.name,
-        "checkpoint": str(result.checkpoint),
-    }
 
 
 def evaluate_on_soil(checkpoint: str | Path, episodes: int, seed: int) -> dict[str, float]:
@@ -113,7 +83,8 @@ def main() -> None:
     summaries = []
     for name in args.configs:
         print(f"== {name}: fine-tune on soil for {args.minutes:g} min from {checkpoint}")
-        summaries.append(finetune(name, checkpoint, args.minutes, args.out, args.runs, args.seed))
+        kwargs = {"resume": checkpoint, "terrain": "soil", "finetune": True}
+        summaries.append(run_config(name, args.minutes, args.out, args.runs, args.seed, **kwargs))
     print_table(summaries)
     evaluation = {}
     if args.eval_episodes > 0:
