@@ -274,6 +274,7 @@ def test_pushes_kick_the_base_at_the_interval():
         ({"terrain": "mud"}, r"terrain='mud': expected one of rigid, soil"),
         ({"terrain": "soil", "soil": "clay"}, r"soil preset 'clay'"),
         ({"terrain": "soil", "soil_window": 0.1}, "soil_window=0.1"),
+        ({"terrain": "soil", "soil_resolution": 0.0}, "soil_resolution=0.0"),
     ],
 )
 def test_bad_settings_name_the_value(kwargs, message):

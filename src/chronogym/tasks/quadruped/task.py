@@ -139,6 +139,10 @@ class Go1VelocityTask(MujocoTask):
             raise ValueError(f"impratio={impratio!r}: expected a float >= 1")
         if terrain not in TERRAINS:
             raise ValueError(f"terrain={terrain!r}: expected one of {', '.join(TERRAINS)}")
+        if not (isinstance(soil_resolution, (int, float)) and 0.001 <= soil_resolution <= 0.1):
+            raise ValueError(
+                f"soil_resolution={soil_resolution!r}: expected a node spacing in [0.001, 0.1] m"
+            )
         if not (isinstance(soil_window, (int, float)) and 0.5 <= soil_window <= 100):
             raise ValueError(f"soil_window={soil_window!r}: expected a side length in [0.5, 100] m")
         if cone not in ("pyramidal", "elliptic"):
