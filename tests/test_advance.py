@@ -142,3 +142,104 @@ def test_run_loops_over_generic_objects():
         ("terrain.Synchronize", 1.5),
     ]
     assert sum(entry[0] == "system.DoStepDynamics" for entry in log) == 2
+
+
+# -- who steps a Chrono system: the first tick checks every reachable system's clock ----------
+class ClockedSystem:
+    """Shaped like a ChSystem with its clock: DoStepDynamics(dt) advances GetChTime()."""
+
+    def __init__(self):
+        self.time = 0.0
+
+    def DoStepDynamics(self, dt):
+        self.time += dt
+
+    def GetChTime(self):
+        return self.time
+
+
+class OwningVehicle:
+    """A Chrono vehicle: Advance steps its system only if it created it (owns it)."""
+
+    def __init__(self, system, owns):
+        self.system, self.owns = system, owns
+
+    def Synchronize(self, t):
+        pass
+
+    def Advance(self, dt):
+        if self.owns:
+            self.system.DoStepDynamics(dt)
+
+    def GetSystem(self):
+        return self.system
+
+
+class FsiSystem:
+    """Chrono 10's ChFsiSystem: DoStepDynamics(dt) steps its multibody system itself."""
+
+    def __init__(self, mbs):
+        self.mbs = mbs
+
+    def DoStepDynamics(self, dt):
+        self.mbs.DoStepDynamics(dt)
+
+    def GetMultibodySystem(self):
+        return self.mbs
+
+
+class LegacyFsi:
+    """Chrono 8/9's ChSystemFsi: DoStepDynamics_FSI() with its own step size."""
+
+    def __init__(self, step):
+        self.step, self.calls = step, 0
+
+    def DoStepDynamics_FSI(self):
+        self.calls += 1
+
+    def GetStepSize(self):
+        return self.step
+
+
+def plan_of(owns: bool, list_system: bool) -> tuple[ClockedSystem, list]:
+    system = ClockedSystem()
+    vehicle = OwningVehicle(system, owns)
+    return system, [vehicle, system] if list_system else [vehicle]
+
+
+@pytest.mark.parametrize(("owns", "list_system"), [(True, False), (False, True)])
+def test_each_system_stepped_once_passes(owns, list_system):
+    system, plan = plan_of(owns, list_system)
+    advancer = Advancer(plan, 0.01)
+    advancer.run(0.0, 3)
+    assert system.time == pytest.approx(0.03)
+
+
+@pytest.mark.parametrize(
+    ("owns", "list_system", "match"),
+    [
+        (False, False, r"advanced its time by 0\.0 s .*nothing steps it"),
+        (True, True, r"advanced its time by 0\.02 s .*stepped 2 times.*remove the system"),
+    ],
+)
+def test_system_stepped_never_or_twice_is_named(owns, list_system, match):
+    _, plan = plan_of(owns, list_system)
+    with pytest.raises(RuntimeError, match=match):
+        Advancer(plan, 0.01)(0.0)
+
+
+def test_fsi_system_and_its_multibody_system_listed_twice():
+    mbs = ClockedSystem()
+    Advancer([FsiSystem(mbs)], 0.01)(0.0)  # the FSI system steps its MBS itself
+    assert mbs.time == pytest.approx(0.01)
+    with pytest.raises(RuntimeError, match=r"GetMultibodySystem\(\).*stepped 2 times"):
+        Advancer([FsiSystem(mbs), mbs], 0.01)(0.0)
+
+
+def test_legacy_fsi_shape_and_its_step_size():
+    fsi = LegacyFsi(0.001)
+    advancer = Advancer([fsi], 0.001)
+    advancer.run(0.0, 4)
+    assert fsi.calls == 4 and advancer.plan == ["0: LegacyFsi.DoStepDynamics_FSI"]
+    with pytest.raises(ValueError, match=r"LegacyFsi step size 0\.001 differs from dt=0\.002"):
+        Advancer([fsi], 0.002)

@@ -98,8 +98,12 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     for name in ("workers", "trials"):
         if getattr(args, name) < 1:
             raise SystemExit(f"--{name}={getattr(args, name)}: expected an integer >= 1")
-    objective = LanderObjective(terrain=args.terrain, seed=args.seed)
-    study_name = args.study or f"lander-{args.terrain}"
+    try:  # engine checks (Chrono: rigid terrain, PyChrono installed) before Ray starts
+        objective = LanderObjective(terrain=args.terrain, seed=args.seed, engine=args.engine)
+    except (ValueError, ModuleNotFoundError) as exc:
+        raise SystemExit(f"chronogym optimize lander: {exc}") from None
+    engine_tag = "" if args.engine == "mujoco" else f"-{args.engine}"
+    study_name = args.study or f"lander-{args.terrain}{engine_tag}"
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     sampler = optuna.samplers.TPESampler(
         seed=args.seed,
@@ -114,10 +118,19 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         sampler=sampler,
         load_if_exists=True,
     )
+    # studies from before --engine hold MuJoCo trials; a new study takes this run's engine
+    study_engine = study.user_attrs.get("engine", "mujoco" if study.trials else args.engine)
+    if study_engine != args.engine:
+        raise SystemExit(
+            f"chronogym optimize lander: study {study_name!r} holds {study_engine} trials; "
+            f"--engine {args.engine} needs another --study"
+        )
     study.set_user_attr("terrain", args.terrain)
+    study.set_user_attr("engine", args.engine)
     print(
         f"chronogym optimize lander: study {study_name!r} in {args.storage} "
-        f"({args.terrain} terrain, {args.workers} parallel workers, {args.trials} trials)"
+        f"({args.terrain} terrain, {args.engine}, {args.workers} parallel workers, "
+        f"{args.trials} trials)"
     )
     if args.workers > (os.cpu_count() or 1):
         print(f"  note: {args.workers} workers on {os.cpu_count()} CPUs oversubscribe the machine")
@@ -252,6 +265,7 @@ def cmd_envs(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from chronogym.optim.lander import ENGINES as LANDER_ENGINES
     from chronogym.optim.lander import TERRAINS as LANDER_TERRAINS
 
     parser = argparse.ArgumentParser(
@@ -273,7 +287,15 @@ def build_parser() -> argparse.ArgumentParser:
     opt.add_argument("--trials", type=int, default=40, help="finished trials wanted in the study")
     opt.add_argument("--terrain", default="rigid", choices=list(LANDER_TERRAINS))
     opt.add_argument("--storage", default=DEFAULT_STORAGE, help="Optuna storage URL")
-    opt.add_argument("--study", default=None, help="study name (default lander-TERRAIN)")
+    opt.add_argument(
+        "--engine",
+        default="mujoco",
+        choices=list(LANDER_ENGINES),
+        help="physics engine (chrono: rigid terrain only, needs PyChrono)",
+    )
+    opt.add_argument(
+        "--study", default=None, help="study name (default lander-TERRAIN, +-chrono for Chrono)"
+    )
     opt.add_argument("--seed", type=int, default=0)
     opt.add_argument("--startup-trials", type=int, default=10, help="random trials before TPE")
     opt.add_argument("--no-constant-liar", action="store_true")

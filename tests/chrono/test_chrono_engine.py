@@ -1,9 +1,10 @@
 """Project Chrono engine: state readers, ChronoTask reset, the Chrono cart-pole on Ray.
 
-Every test but the last needs PyChrono (conda only) and is skipped without it. Ray
-workers import pychrono too: a local cluster started by the test session inherits
-the driver's environment (``PYTHONPATH`` included, see tests/conftest.py), so a
-PyChrono found through ``PYTHONPATH`` is found by the workers as well.
+Every test but the last needs PyChrono (conda only) and is skipped without it (the
+``chrono`` fixture of conftest.py). Ray workers import pychrono too: a local cluster
+started by the test session inherits the driver's environment (``PYTHONPATH`` included,
+see tests/conftest.py), so a PyChrono found through ``PYTHONPATH`` is found by the
+workers as well.
 """
 
 from __future__ import annotations
@@ -25,12 +26,6 @@ from chronogym import RayVectorEnv, SerialVectorEnv, SimEnv
 
 ENV_ID = "chronogym/ChronoCartPole-v0"
 G = 9.81
-SKIP_REASON = "PyChrono is not installed (conda install projectchrono::pychrono -c conda-forge)"
-
-
-@pytest.fixture(scope="module")
-def chrono():
-    return pytest.importorskip("pychrono", reason=SKIP_REASON)
 
 
 def falling_system(chrono, timestepper: str = "Type_TRAPEZOIDAL"):
@@ -56,6 +51,17 @@ def test_free_fall_readers(chrono):
     np.testing.assert_allclose(body_lin_vel(body), [0, 0, -G * t], atol=1e-6)
     np.testing.assert_allclose(body_rot(body), [1, 0, 0, 0], atol=1e-12)
     np.testing.assert_allclose(body_ang_vel(body), 0, atol=1e-12)
+
+
+def test_advancer_checks_who_steps_a_real_system(chrono):
+    """The first tick reads ``GetChTime`` of a real ChSystem: one listing passes, two fail."""
+    from chronogym import Advancer
+
+    system, _ = falling_system(chrono)
+    Advancer([system], 1e-3).run(0.0, 3)
+    assert system.GetChTime() == pytest.approx(3e-3)
+    with pytest.raises(RuntimeError, match=r"advanced its time by 0\.002 s .*stepped 2 times"):
+        Advancer([system, system], 1e-3)(system.GetChTime())
 
 
 def test_default_integrator_matches_semi_implicit_euler(chrono):

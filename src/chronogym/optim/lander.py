@@ -1,4 +1,4 @@
-"""The lander design study: search space, terrains and the per-worker evaluator."""
+"""The lander design study: search space, terrains, engines and the per-worker evaluator."""
 
 from __future__ import annotations
 
@@ -30,6 +30,33 @@ SOIL_PRESET = "mars"
 
 TERRAINS = ("rigid", "rough", "soil")
 
+#: Physics engines of the lander: MuJoCo (``LanderSim``, every terrain) and Project Chrono
+#: (``ChronoLanderSim``, rigid flat ground only; needs PyChrono).
+ENGINES = ("mujoco", "chrono")
+
+
+def check_engine(engine: str, terrain: str) -> None:
+    """Raise before any worker starts if ``engine`` cannot run on ``terrain`` here.
+
+    ``chrono`` needs flat rigid ground and an importable PyChrono (imported here, in the
+    driver, so a missing install is one clear error instead of a failed trial per worker).
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine={engine!r}: expected one of {list(ENGINES)}")
+    if engine != "chrono":
+        return
+    if terrain != "rigid":
+        raise ValueError(
+            f"engine='chrono' supports terrain='rigid' only (flat rigid ground); got "
+            f"terrain={terrain!r} (use engine='mujoco' for rough ground and soil)"
+        )
+    from chronogym.engines.chrono import import_pychrono
+
+    try:
+        import_pychrono()
+    except ModuleNotFoundError as exc:
+        raise ModuleNotFoundError(f"engine='chrono': {exc}", name="pychrono") from exc
+
 
 def make_terrain(name: str) -> Any:
     """Terrain preset by name: ``rigid`` (flat), ``rough`` (8 deg slope, 12 rocks) or ``soil``
@@ -57,30 +84,43 @@ def suggest_lander_design(trial: Any) -> dict[str, float]:
     }
 
 
+def _simulation_class(engine: str) -> type:
+    """``LanderSim`` (MuJoCo) or ``ChronoLanderSim`` (imported only when asked for)."""
+    if engine == "chrono":
+        from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+
+        return ChronoLanderSim
+    from chronogym.tasks.lander import LanderSim
+
+    return LanderSim
+
+
 class LanderEvaluator:
     """Evaluates designs in one worker, keeping its simulation between trials.
 
-    A new ``f_y`` reuses the compiled model; a new geometry rebuilds it
-    (``LanderSim.reset``). A diverged simulation is a :class:`TrialFailure`.
+    MuJoCo: a new ``f_y`` reuses the compiled model; a new geometry rebuilds it
+    (``LanderSim.reset``). Chrono rebuilds its system at every reset. A diverged
+    simulation is a :class:`TrialFailure`.
     """
 
-    def __init__(self, terrain: str, seed: int) -> None:
+    def __init__(self, terrain: str, seed: int, engine: str = "mujoco") -> None:
         self.terrain = make_terrain(terrain)
         self.seed = seed
+        self.engine = engine
         self.sim: Any = None
 
     def __call__(self, params: dict[str, Any]) -> tuple[float, dict[str, Any]]:
-        from chronogym.engines.mujoco import mujoco_diverged
         from chronogym.optim.parallel import TrialFailure
-        from chronogym.tasks.lander import LanderDesign, LanderSim
+        from chronogym.tasks.lander import LanderDesign
 
         design = LanderDesign(**params)
         if self.sim is None:
-            self.sim = LanderSim(design, terrain=self.terrain, seed=self.seed)
+            sim_class = _simulation_class(self.engine)
+            self.sim = sim_class(design, terrain=self.terrain, seed=self.seed)
         else:
             self.sim.reset(design)
         metrics = self.sim.run()
-        if mujoco_diverged(self.sim.data) or not math.isfinite(metrics["J"]):
+        if self.sim.diverged() or not math.isfinite(metrics["J"]):
             raise TrialFailure(f"the simulation diverged (J={metrics['J']!r})")
         attrs = {key: _plain(metrics[key]) for key in LANDER_METRICS if key in metrics}
         return float(metrics["J"]), attrs
@@ -88,17 +128,23 @@ class LanderEvaluator:
 
 @dataclass(frozen=True)
 class LanderObjective:
-    """Picklable factory of :class:`LanderEvaluator`, sent to each worker."""
+    """Picklable factory of :class:`LanderEvaluator`, sent to each worker.
+
+    ``engine="chrono"`` evaluates the designs in Project Chrono (rigid terrain only); the
+    checks of :func:`check_engine` run here, in the driver, before any worker starts.
+    """
 
     terrain: str = "rigid"
     seed: int = 0
+    engine: str = "mujoco"
 
     def __post_init__(self) -> None:
         if self.terrain not in TERRAINS:
             raise ValueError(f"terrain={self.terrain!r}: expected one of {list(TERRAINS)}")
+        check_engine(self.engine, self.terrain)
 
     def __call__(self) -> LanderEvaluator:
-        return LanderEvaluator(self.terrain, self.seed)
+        return LanderEvaluator(self.terrain, self.seed, self.engine)
 
 
 def describe_design(params: dict[str, float]) -> str:

@@ -18,14 +18,25 @@ Modules:
 * :mod:`~chronogym.tasks.lander.absorber` -- :class:`HoneycombAbsorber`, the crush law;
 * :mod:`~chronogym.tasks.lander.model` -- the ``MjSpec`` model builder and its topology,
   :class:`Terrain` (rigid plane, slope, rocks or soil) and :func:`terrain_params`;
+* :mod:`~chronogym.tasks.lander.landing` -- :class:`Landing`, the engine-independent
+  history, settling and metrics (:func:`objective`, :func:`filtered_acceleration`);
 * :mod:`~chronogym.tasks.lander.sim` -- :class:`LanderSim` and :func:`simulate_landing`
-  (metrics, and the energy ledger whose terms are :data:`LEDGER_TERMS`).
+  (MuJoCo; metrics, and the energy ledger whose terms are :data:`LEDGER_TERMS`);
+* :mod:`~chronogym.tasks.lander.chrono_model`, :mod:`~chronogym.tasks.lander.chrono_struts`
+  and :mod:`~chronogym.tasks.lander.chrono_sim` -- the same lander in Project Chrono
+  (:class:`ChronoLanderSim`, :class:`ChronoSettings`; flat rigid ground; needs PyChrono,
+  imported only when a Chrono lander is built).
 
-MuJoCo only (and ``chronogym.terrain``, numba, on soil): no Gymnasium, Ray or Optuna
-import here.
+No Gymnasium, Ray, Optuna or PyChrono import here (``chronogym.terrain``, numba, on soil).
 """
 
 from chronogym.tasks.lander.absorber import HoneycombAbsorber
+from chronogym.tasks.lander.chrono_model import ChronoSettings
+from chronogym.tasks.lander.chrono_sim import (
+    CHRONO_LEDGER_TERMS,
+    ChronoLanderSim,
+    simulate_chrono_landing,
+)
 from chronogym.tasks.lander.design import (
     DEFAULT_DESIGN,
     DESIGN_BOUNDS,
@@ -33,6 +44,7 @@ from chronogym.tasks.lander.design import (
     LanderDesign,
     LanderParams,
 )
+from chronogym.tasks.lander.landing import Landing, filtered_acceleration, objective
 from chronogym.tasks.lander.model import (
     N_LEGS,
     LanderModelInfo,
@@ -40,25 +52,34 @@ from chronogym.tasks.lander.model import (
     build_lander_model,
     build_lander_spec,
     leg_azimuths,
+    leg_geometry,
     terrain_params,
 )
 from chronogym.tasks.lander.sim import LEDGER_TERMS, LanderSim, simulate_landing
 
 __all__ = [
+    "CHRONO_LEDGER_TERMS",
     "DEFAULT_DESIGN",
     "DESIGN_BOUNDS",
     "DESIGN_NAMES",
     "LEDGER_TERMS",
     "N_LEGS",
+    "ChronoLanderSim",
+    "ChronoSettings",
     "HoneycombAbsorber",
     "LanderDesign",
     "LanderModelInfo",
     "LanderParams",
     "LanderSim",
+    "Landing",
     "Terrain",
     "build_lander_model",
     "build_lander_spec",
+    "filtered_acceleration",
     "leg_azimuths",
+    "leg_geometry",
+    "objective",
+    "simulate_chrono_landing",
     "simulate_landing",
     "terrain_params",
 ]

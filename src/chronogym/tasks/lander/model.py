@@ -97,6 +97,8 @@ __all__ = [
     "build_lander_model",
     "build_lander_spec",
     "leg_azimuths",
+    "leg_geometry",
+    "quat_from_axes",
     "terrain_params",
 ]
 
@@ -214,8 +216,8 @@ def leg_azimuths(beta: float) -> np.ndarray:
     return np.concatenate([[c - beta / 2, c + beta / 2] for c in centres])
 
 
-def _quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Quaternion of the rotation whose columns are the unit vectors x, y, z."""
+def quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors x, y, z."""
     mat = np.column_stack([x, y, z]).reshape(-1)
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, mat)
@@ -228,11 +230,19 @@ def _frame_with_z(z: np.ndarray) -> np.ndarray:
     x = np.cross(helper, z)
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
-    return _quat_from_axes(x, y, z)
+    return quat_from_axes(x, y, z)
 
 
-def _leg_geometry(design: LanderDesign, p: LanderParams) -> list[dict]:
-    """Per-leg points and frames in the chassis frame (origin at the chassis centre)."""
+def leg_geometry(design: LanderDesign, p: LanderParams) -> list[dict]:
+    """Per-leg points and frames in the chassis frame (origin at the chassis centre, z up).
+
+    One dict per leg (order of :func:`leg_azimuths`): ``phi`` (azimuth), the points ``A``
+    (hinge), ``B`` (secondary-strut root), ``K`` (knee) and ``P`` (pad ball joint at zero
+    stroke), ``strut_rot`` (columns: x tangential = hinge axis, y in the radial plane, z
+    along the strut pointing up = slide axis, + is compression) and its quaternion
+    ``strut_quat`` (w, x, y, z), the secondary strut's frame ``sec_quat`` (z from B to K)
+    and length ``sec_len``.  Pure geometry: every engine's builder uses it.
+    """
     bottom = -p.chassis_length / 2.0
     legs = []
     for phi in leg_azimuths(design.beta):
@@ -258,7 +268,7 @@ def _leg_geometry(design: LanderDesign, p: LanderParams) -> list[dict]:
                 "B": b,
                 "K": k,
                 "P": pad_joint,
-                "strut_quat": _quat_from_axes(x_l, y_l, z_l),
+                "strut_quat": quat_from_axes(x_l, y_l, z_l),
                 "strut_rot": rot,
                 "sec_quat": _frame_with_z(bk / np.linalg.norm(bk)),
                 "sec_len": float(np.linalg.norm(bk)),
@@ -335,7 +345,7 @@ def build_lander_spec(
     """
     terrain = terrain if terrain is not None else Terrain()
     p = terrain_params(params if params is not None else LanderParams(), terrain)
-    legs = _leg_geometry(design, p)
+    legs = leg_geometry(design, p)
     tc = p.constraint_timeconst
     solref = [tc, 1.0]
 
@@ -452,7 +462,7 @@ def build_lander_spec(
         )
 
         # foot pad, level at start, on a ball joint
-        pad_quat = _quat_from_axes(*leg["strut_rot"])  # rows of R: R^T, the inverse
+        pad_quat = quat_from_axes(*leg["strut_rot"])  # rows of R: R^T, the inverse
         pad = lower.add_body(name=f"pad_{i}", pos=[0.0, 0.0, 0.0], quat=pad_quat.tolist())
         pad.add_joint(
             name=f"pad_ball_{i}",

@@ -164,8 +164,9 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
-from chronogym.tasks.lander.absorber import HoneycombAbsorber
+from chronogym.engines.mujoco import mujoco_diverged
 from chronogym.tasks.lander.design import DEFAULT_DESIGN, LanderDesign, LanderParams
+from chronogym.tasks.lander.landing import Landing
 from chronogym.tasks.lander.model import (
     N_LEGS,
     LanderModelInfo,
@@ -215,8 +216,11 @@ for _type, _term in (
     _EFC_TERM[int(_type)] = LEDGER_TERMS.index(_term)
 
 
-class LanderSim:
+class LanderSim(Landing):
     """Model, data and absorbers of one lander; one :meth:`step` per physics tick.
+
+    History, settling (:meth:`run`) and the engine-independent metrics come from
+    :class:`~chronogym.tasks.lander.landing.Landing`.
 
     Args:
         design: the design vector.
@@ -242,18 +246,8 @@ class LanderSim:
         self.model = self.info.model
         self.data = mujoco.MjData(self.model)
         self.soil = self._make_soil()
-        p = self.params
-        self.absorber = HoneycombAbsorber(
-            N_LEGS,
-            f_y=design.f_y,
-            max_stroke=p.max_stroke,
-            elastic_stroke=p.elastic_stroke,
-            densification_onset=p.densification_onset,
-            densification_ratio=p.densification_ratio,
-            damping=p.absorber_damping(design.f_y),
-        )
-        self._window = max(1, round(p.accel_window / p.timestep))
-        self._capacity = math.ceil(p.max_time / p.timestep) + self._window + 2
+        self._init_absorber()
+        self._init_history(self.params.timestep)
         self._scratch: mujoco.MjData | None = None
         self.reset()
 
@@ -279,8 +273,7 @@ class LanderSim:
             self.soil = self._make_soil()
             self._scratch = None
         self.info.design = self.design
-        self.absorber.set_properties(self.design.f_y, p.absorber_damping(self.design.f_y))
-        self.absorber.reset()
+        self._reset_absorber()
 
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
@@ -293,17 +286,9 @@ class LanderSim:
         self._chassis = self.info.chassis_body
         self._sq = self.info.slide_qpos
         self._sd = self.info.slide_dof
-        self._n = 0
-        self._vel = np.zeros((self._capacity, 3))
-        self._tilt_cos = np.ones(self._capacity)
-        self._vel[0] = d.qvel[0:3]
         slope = self.terrain.slope
         self._normal = np.array([math.sin(slope), 0.0, math.cos(slope)])
-        self._tilt_cos[0] = self._cos_tilt()
-        self._ke0 = 0.5 * p.total_mass * float(d.qvel[0] ** 2 + d.qvel[2] ** 2)
-        self._t_touchdown: float | None = None
-        self._calm_since: float | None = None
-        self.settled = False
+        self._start_history(d.qvel[0:3], self._cos_tilt())
         # energy ledger (see the module docstring)
         self._damping = m.dof_damping.copy()
         self._split_normal = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
@@ -371,11 +356,7 @@ class LanderSim:
         d.qfrc_applied[self._sd] = -force
         mujoco.mj_step(self.model, d)
         self._book_work(force)
-        n = self._n + 1
-        if n < self._capacity:
-            self._vel[n] = d.qvel[0:3]
-            self._tilt_cos[n] = self._cos_tilt()
-            self._n = n
+        self._record(d.qvel[0:3], self._cos_tilt())
         if self._t_touchdown is None and (d.ncon > 0 or self._on_soil()):
             self._t_touchdown = float(d.time)
 
@@ -443,43 +424,13 @@ class LanderSim:
         nx, _, nz = self._normal
         return float(r[2] * nx + r[8] * nz)
 
-    def _calm(self) -> bool:
-        p = self.params
+    def _chassis_velocity(self) -> tuple[np.ndarray, np.ndarray]:
         q = self.data.qvel
-        return (
-            float(q[0] ** 2 + q[1] ** 2 + q[2] ** 2) < p.settle_speed**2
-            and float(q[3] ** 2 + q[4] ** 2 + q[5] ** 2) < p.settle_angular_speed**2
-        )
+        return q[0:3], q[3:6]
 
-    def run(self) -> dict[str, Any]:
-        """Step until settled (calm for ``settle_time`` after touchdown) or ``max_time``;
-        return :meth:`metrics`."""
-        p = self.params
-        check_every = max(1, round(0.005 / p.timestep))
-        n_max = self._capacity - self._window - 2
-        while self._n < n_max:
-            for _ in range(check_every):
-                self.step()
-            if self._t_touchdown is None:
-                continue
-            if self._calm():
-                if self._calm_since is None:
-                    self._calm_since = self.time
-                elif self.time - self._calm_since >= p.settle_time:
-                    self.settled = True
-                    break
-            else:
-                self._calm_since = None
-        return self.metrics()
-
-    # --- metrics ------------------------------------------------------------------------------
-    def chassis_acceleration(self) -> np.ndarray:
-        """Filtered chassis CoM acceleration history (kinematic), shape (n, 3)."""
-        w = self._window
-        vel = self._vel[: self._n + 1]
-        if len(vel) <= w:
-            return np.zeros((0, 3))
-        return (vel[w:] - vel[:-w]) / (w * self.params.timestep)
+    def diverged(self) -> bool:
+        """MuJoCo flagged an unstable state, or NaN/Inf in the state (``mujoco_diverged``)."""
+        return mujoco_diverged(self.data)
 
     def mechanical_energy(self) -> tuple[float, float]:
         """(potential, kinetic) energy of the current state [J], from MuJoCo's
@@ -542,45 +493,15 @@ class LanderSim:
 
     def metrics(self) -> dict[str, Any]:
         """Touchdown metrics so far (see the module docstring)."""
-        p = self.params
-        d = self.data
-        ab = self.absorber
-        acc = self.chassis_acceleration()
-        g_vec = np.array([0.0, 0.0, -p.gravity])
-        a_max = float(np.max(np.linalg.norm(acc, axis=1))) if len(acc) else 0.0
-        a_max_proper = float(np.max(np.linalg.norm(acc - g_vec, axis=1))) if len(acc) else 0.0
-        tilt = np.arccos(np.clip(self._tilt_cos[: self._n + 1], -1.0, 1.0))
-        e_abs = float(np.sum(ab.absorbed_energy))
-        e_init = p.e_init
-        a_ref = p.a_ref
         energy = self.energy_ledger()
-        j = a_max / a_ref + (p.energy_weight * (e_abs / e_init - 1.0)) ** 2
-        return {
-            "J": float(j),
-            "a_max": a_max,
-            "a_max_proper": a_max_proper,
-            "a_ref": a_ref,
-            "E_abs": e_abs,
-            "E_abs_legs": ab.absorbed_energy.copy(),
-            "E_init": e_init,
-            "E_soil": energy["soil_dissipated"] + energy["soil_elastic"],
-            "max_sinkage": self._max_sinkage(),
-            "E_available": energy["E_in"],
-            "KE_0": self._ke0,
-            "max_stroke": float(np.max(ab.max_stroke_reached)),
-            "max_stroke_legs": ab.max_stroke_reached.copy(),
-            "crush_stroke_legs": ab.crush_stroke.copy(),
-            "bottomed_out": bool(np.any(ab.bottomed_out)),
-            "max_tilt": float(np.max(tilt)),
-            "final_tilt": float(tilt[-1]),
-            "tipped_over": bool(np.max(tilt) > p.tip_angle),
-            "settled": bool(self.settled),
-            "t_touchdown": self._t_touchdown,
-            "t_end": float(d.time),
-            "n_steps": int(self._n),
-            "touchdown_speed": p.touchdown_speed,
-            "energy": energy,
-        }
+        metrics = self._landing_metrics()
+        metrics.update(
+            E_soil=energy["soil_dissipated"] + energy["soil_elastic"],
+            max_sinkage=self._max_sinkage(),
+            E_available=energy["E_in"],
+            energy=energy,
+        )
+        return metrics
 
 
 def simulate_landing(
