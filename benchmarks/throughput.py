@@ -11,12 +11,14 @@ Prints an aligned table and writes JSON (default ``benchmarks/results/throughput
     python benchmarks/throughput.py --transports actor socket   # several RayVectorEnv transports
     python benchmarks/throughput.py --breakdown   # one vector step split into phases (µs)
 
-Counting: ``steps/s`` counts env steps as Gymnasium does, including the autoreset
-steps of NEXT_STEP mode, which run no physics. With random actions the pole falls
-within a step or two once ``k`` is large, so up to half of all steps are such resets.
-``sim-steps/s`` counts only the env steps that ran physics; the AsyncVectorEnv ratio
-and the parallel efficiency use it, so they compare like with like and against the
-raw single-env rate (``k`` ticks + observe per step).
+Counting: the cart-pole runs with ``terminate=False`` (the pole may fall; episodes end
+only by truncation after 500 steps), so every env step costs the same physics and no
+worker waits for another because its envs happened to reset (with falling episodes,
+up to half of all steps were physics-free autoresets at large ``k``, spread unevenly
+over the workers). ``steps/s`` counts env steps as Gymnasium does, including the
+autoreset steps of NEXT_STEP mode; ``sim-steps/s`` counts only the env steps that ran
+physics; the AsyncVectorEnv ratio and the parallel efficiency use it, so they compare
+like with like and against the raw single-env rate (``k`` ticks + observe per step).
 
 ``--breakdown`` replaces the sweep by a table of where one vector step's time goes (driver
 prepare / submit / wait / get / join, worker compute and (de)serialization, Ray's call and
@@ -25,8 +27,8 @@ transfer) per transport and envs_per_worker at N = 16, with the CPU the workers 
 ``RayVectorEnv.profile_steps``. The sweep ends with the goal table of the default transport:
 x_async and efficiency per cost level side by side.
 
-``--async-k`` adds ``ray-async`` rows: the same Ray shapes (two workers or more)
-driven by ``send`` / ``recv(min_envs=N/2)``, each answered worker sent its next
+``--async-k`` adds ``ray-async`` rows: the same Ray shapes (two workers or more, default
+transport) driven by ``send`` / ``recv(min_envs=N/2)``, each answered worker sent its next
 actions at once, against the barrier ``step`` of the ``ray`` rows. Their
 ``µs/vstep`` is per ``recv``, which returns about N/2 envs.
 """
@@ -55,6 +57,8 @@ from chronogym.vector.ray_vector_env import default_transport
 
 ENV_ID = "chronogym/CartPole-v0"
 DT = 0.002
+#: Task arguments besides ``k``: endless episodes, so every step costs the same physics.
+TASK_KWARGS = {"dt": DT, "terminate": False}
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "throughput.json"
 BREAKDOWN_OUT = DEFAULT_OUT.with_name("throughput_breakdown.json")
 # RayVectorEnv transport -> row label
@@ -233,7 +237,7 @@ def machine_info() -> dict[str, Any]:
 
 def raw_task(k: int) -> CartPoleTask:
     """The cart-pole task with its model and data built, outside any Gymnasium env."""
-    task = CartPoleTask(dt=DT, k=k)
+    task = CartPoleTask(k=k, **TASK_KWARGS)
     task.init()
     return task
 
@@ -276,7 +280,7 @@ def choose_levels(targets_us: list[float], tick_us: float) -> list[CostLevel]:
 
 def run_simenv(k: int, seconds: float, seed: int) -> tuple[int, float]:
     """``gymnasium.make(...).unwrapped`` stepped with random actions, reset on done."""
-    env = gym.make(ENV_ID, k=k, dt=DT).unwrapped
+    env = gym.make(ENV_ID, k=k, **TASK_KWARGS).unwrapped
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     steps, start = 0, time.perf_counter()
@@ -299,7 +303,7 @@ def run_simenv(k: int, seconds: float, seed: int) -> tuple[int, float]:
 
 def make_vector_env(config: Config) -> gym.vector.VectorEnv:
     """Build the vector env a config names."""
-    env_kwargs = {"k": config.level.k, "dt": DT}
+    env_kwargs = {"k": config.level.k, **TASK_KWARGS}
     if config.backend == "serial":
         return chronogym.SerialVectorEnv(ENV_ID, config.num_envs, env_kwargs=env_kwargs)
     if config.backend == "async":
@@ -310,7 +314,7 @@ def make_vector_env(config: Config) -> gym.vector.VectorEnv:
             config.num_envs,
             envs_per_worker=config.envs_per_worker,
             env_kwargs=env_kwargs,
-            transport=BACKEND_TRANSPORTS.get(config.backend, "actor"),
+            transport=BACKEND_TRANSPORTS.get(config.backend, DEFAULT_TRANSPORT),
         )
     raise ValueError(f"backend={config.backend!r}: expected one of {VECTOR_BACKENDS}")
 
@@ -584,6 +588,7 @@ def write_json(
         "benchmark": "chronogym throughput (cart-pole)",
         "env_id": ENV_ID,
         "dt": DT,
+        "task_kwargs": TASK_KWARGS,
         "machine": info,
         "settings": {
             key: (str(value) if isinstance(value, Path) else value)
@@ -692,6 +697,17 @@ class Breakdown:
         return self.phases["total"] - self.phases["compute"]
 
     @property
+    def balance(self) -> float:
+        """Mean worker's physics / slowest worker's, per step (1: evenly loaded workers)."""
+        mean = self.phases["compute_sum"] / self.workers
+        return mean / self.phases["compute"] if self.phases["compute"] else 1.0
+
+    @property
+    def efficiency(self) -> float:
+        """Share of the workers' wall time spent in physics: mean worker's physics / step."""
+        return self.phases["compute_sum"] / (self.workers * self.phases["total"])
+
+    @property
     def budget_us(self) -> float:
         """The issue's driver-overhead budget: 100 µs + 5 µs per env."""
         return 100.0 + 5.0 * self.num_envs
@@ -718,7 +734,7 @@ def cpu_percent(pids: list[int], run: Any) -> dict[str, float]:
 
 def breakdown_env(transport: str, num_envs: int, per: int, k: int) -> gym.vector.VectorEnv:
     """The vector env of one breakdown row."""
-    env_kwargs = {"k": k, "dt": DT}
+    env_kwargs = {"k": k, **TASK_KWARGS}
     if transport == "serial":
         return chronogym.SerialVectorEnv(ENV_ID, num_envs, env_kwargs=env_kwargs)
     return chronogym.RayVectorEnv(
@@ -808,7 +824,7 @@ def format_breakdown(rows: list[Breakdown]) -> str:
     head = f"{'transport':>9}  {'N':>3}  {'wrk':>3}  {'e/w':>3}  {'µs/vstep':>8}  "
     head += "  ".join(f"{name:>9}" for name, _ in BREAKDOWN_COLUMNS)
     head += f"  {'overhead':>8}  {'budget':>6}  {'drv':>4}  {'ovh':>4}  {'cpu-idle':>9}  "
-    head += f"{'cpu-busy':>9}"
+    head += f"{'cpu-busy':>9}  {'balance':>7}  {'eff':>5}"
     lines = [head, "-" * len(head)]
     for b in rows:
         cells = "  ".join(
@@ -822,6 +838,7 @@ def format_breakdown(rows: list[Breakdown]) -> str:
             f"  {_ok(b.overhead_us <= b.budget_us):>4}"
             f"  {b.idle_cpu['workers']:>4.0f}/{b.idle_cpu['driver']:<4.0f}"
             f"  {b.busy_cpu['workers']:>4.0f}/{b.busy_cpu['driver']:<4.0f}"
+            f"  {b.balance:>7.2f}  {b.efficiency:>5.2f}"
         )
     return "\n".join(lines)
 
@@ -837,7 +854,11 @@ and transfer, and waiting for a core. driver = prep + submit + get + join (the d
 serial: everything runs inside submit (no Ray). µs/vstep: an unprofiled run.
 overhead = profiled µs/vstep - w-comp; budget = 100 µs + 5 µs x N (the issue's goal); drv / ovh:
 driver / overhead within budget. cpu-idle, cpu-busy: % of one core used by the workers (summed) /
-the driver while nothing steps / while stepping (a polling transport shows up in cpu-idle)."""
+the driver while nothing steps / while stepping (a polling transport shows up in cpu-idle).
+balance = mean worker's w-comp / slowest worker's (the barrier waits for the slowest); eff =
+mean worker's w-comp / profiled µs per vector step: the share of each worker's wall time spent
+in physics, = balance x (1 - overhead / step). Run at a dearer cost (--targets-us) to check the
+goal eff >= 0.9 at >= 1 ms of physics per call."""
 
 
 def run_breakdown(args: argparse.Namespace, tick_us: float) -> list[Breakdown]:
@@ -921,7 +942,14 @@ def main_breakdown(args: argparse.Namespace, tick_us: float, wall: float) -> int
         "tick_us": tick_us,
         "default_transport": DEFAULT_TRANSPORT,
         "rows": [
-            {**asdict(b), "overhead_us": b.overhead_us, "budget_us": b.budget_us} for b in rows
+            {
+                **asdict(b),
+                "overhead_us": b.overhead_us,
+                "budget_us": b.budget_us,
+                "balance": b.balance,
+                "efficiency": b.efficiency,
+            }
+            for b in rows
         ],
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)

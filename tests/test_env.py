@@ -55,6 +55,17 @@ def test_max_episode_steps_argument_overrides_task():
     assert env.step(np.zeros(1, dtype=np.float32))[3] is True
 
 
+def test_endless_cartpole_only_truncates():
+    """``terminate=False`` (the throughput benchmarks): the pole falls, the episode goes on."""
+    env = gym.make("chronogym/CartPole-v0", terminate=False, max_episode_steps=60)
+    env.reset(seed=0)
+    steps = [env.step(np.ones(1, dtype=np.float32)) for _ in range(60)]
+    assert abs(steps[-1][0][1]) > CartPoleTask.max_angle  # it would have terminated
+    assert not any(s[2] for s in steps) and [s[3] for s in steps].index(True) == 59
+    with pytest.raises(ValueError, match=r"terminate='no': expected True or False"):
+        CartPoleTask(terminate="no")
+
+
 def test_divergence_terminates_with_flag():
     env = SimEnv(ExplodingCartPole(explode_at=2))
     env.reset(seed=0)

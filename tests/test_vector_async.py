@@ -11,87 +11,22 @@ import signal
 import time
 from functools import partial
 
-import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.error import AlreadyPendingCallError, NoAsyncCallError
 from gymnasium.utils.env_checker import data_equivalence
-from vector_rollouts import ENV_ID, vector_rollout
+from vector_rollouts import (
+    ENV_ID,
+    SEED,
+    STEPS,
+    async_rollout,
+    sync_replay,
+    uneven_fns,
+    vector_rollout,
+)
 
 from chronogym import RayVectorEnv, SerialVectorEnv
 from chronogym.vector import EnvsInFlightError, RecvTimeoutError
-
-SEED = 7
-STEPS = 60  # per env; the policy below drops the pole in ~10-30 steps, so episodes end
-COSTS = (5, 40, 400)  # physics ticks per env step of workers 0, 1, 2 (two envs each)
-
-
-def uneven_fns(costs: tuple[int, ...] = COSTS, per_worker: int = 2) -> list:
-    """Env factories whose step cost differs by worker: ``k`` ticks of ``dt = 20 ms / k``.
-
-    Every env has the same 20 ms control period (so similar episode lengths); only
-    the physics cost of a step differs.
-    """
-    return [partial(gym.make, ENV_ID, k=k, dt=0.02 / k) for k in costs for _ in range(per_worker)]
-
-
-def policy(obs: np.ndarray) -> np.ndarray:
-    """A deterministic action from one env's own observation (chaotic, so episodes end)."""
-    return np.array([np.sin(1e3 * float(np.sum(obs)))], dtype=np.float32)
-
-
-def rows_of(out: tuple, env_ids: np.ndarray) -> dict[int, tuple]:
-    """Per env id: (obs, reward, terminated, truncated, final_obs or None) of one result."""
-    obs, rewards, terms, truncs, info = out[:5]
-    finals = info.get("final_obs", [None] * len(env_ids))
-    has_final = info.get("_final_obs", np.zeros(len(env_ids), dtype=bool))
-    return {
-        int(i): (obs[j], rewards[j], terms[j], truncs[j], finals[j] if has_final[j] else None)
-        for j, i in enumerate(env_ids)
-    }
-
-
-def async_rollout(vec: RayVectorEnv, steps: int, min_envs: int) -> tuple[dict, dict, list]:
-    """async_reset, then send/recv with ``min_envs`` until every env took ``steps`` steps.
-
-    Returns per-env trajectories, per-env actions and the env ids of every recv.
-    """
-    n = vec.num_envs
-    traj: dict[int, list] = {i: [] for i in range(n)}
-    acts: dict[int, list] = {i: [] for i in range(n)}
-    batches, skew = [], 0
-    vec.async_reset(seed=SEED)
-    while vec.envs_in_flight.size:
-        k = min(min_envs, vec.envs_in_flight.size)
-        out = vec.recv(min_envs=k)
-        ids = out[5]
-        assert len(ids) >= k and len(ids) == len(out[0]) == len(out[1])
-        batches.append(ids.tolist())
-        for i, row in rows_of(out, ids).items():
-            traj[i].append(row)
-        todo = [int(i) for i in ids if len(acts[int(i)]) < steps]
-        if todo:
-            actions = np.stack([policy(traj[i][-1][0]) for i in todo])
-            for i, a in zip(todo, actions, strict=True):
-                acts[i].append(a)
-            vec.send(actions, todo)
-        skew = max(skew, max(map(len, acts.values())) - min(map(len, acts.values())))
-    return traj, acts, [batches, skew]
-
-
-def sync_replay(fns: list, acts: dict, steps: int, mode: str) -> dict[int, list]:
-    """The same per-env action sequences through Gymnasium's SyncVectorEnv."""
-    vec = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode(mode))
-    ids = np.arange(len(fns))
-    obs, _ = vec.reset(seed=SEED)
-    zeros = np.zeros(len(fns))
-    traj = {i: [row] for i, row in rows_of((obs, zeros, zeros > 0, zeros > 0, {}), ids).items()}
-    for t in range(steps):
-        out = vec.step(np.stack([acts[i][t] for i in ids]))
-        for i, row in rows_of(out, ids).items():
-            traj[i].append(row)
-    vec.close()
-    return traj
 
 
 @pytest.mark.parametrize("mode", ["NextStep", "SameStep"])

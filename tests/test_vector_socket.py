@@ -12,12 +12,22 @@ from functools import partial
 import numpy as np
 import pytest
 from faulty_tasks import FailingEnv
-from vector_rollouts import ENV_ID, assert_same_rollouts, kill_at, vector_rollout
+from gymnasium.utils.env_checker import data_equivalence
+from vector_rollouts import (
+    ENV_ID,
+    STEPS,
+    assert_same_rollouts,
+    async_rollout,
+    kill_at,
+    sync_replay,
+    uneven_fns,
+    vector_rollout,
+)
 
 from chronogym import RayVectorEnv, SerialVectorEnv
 
 NUM_ENVS = 4
-STEPS = 40
+ROLLOUT = 40
 KILL_AT = 15
 
 
@@ -39,11 +49,11 @@ def test_socket_matches_serial(ray_cluster, mode):
 
 @pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
 def test_sigkilled_worker_is_replaced_and_reconnected(ray_cluster, mode):
-    undisturbed = vector_rollout(SerialVectorEnv(ENV_ID, NUM_ENVS, autoreset_mode=mode), STEPS)
+    undisturbed = vector_rollout(SerialVectorEnv(ENV_ID, NUM_ENVS, autoreset_mode=mode), ROLLOUT)
     vec = socket_env(ENV_ID, NUM_ENVS, envs_per_worker=2, autoreset_mode=mode)
     try:
         old_pids = vec.worker_pids()
-        run = vector_rollout(vec, STEPS, kill=kill_at(old_pids[1], KILL_AT))
+        run = vector_rollout(vec, ROLLOUT, kill=kill_at(old_pids[1], KILL_AT))
         new_pids = vec.worker_pids()
         assert new_pids[0] == old_pids[0] and new_pids[1] != old_pids[1]
         assert all(vec._backend.connected())  # the replacement serves a socket again
@@ -89,7 +99,41 @@ def test_socket_dir_is_private_and_removed_on_close(ray_cluster):
     assert not os.path.exists(directory)
 
 
-def test_profile_and_send_recv_fall_back_to_actor_calls(ray_cluster):
+@pytest.mark.parametrize(
+    ("spin_us", "plain_worker"),
+    [(None, None), (0, None), (None, 1)],
+    ids=["spin", "block", "mixed"],
+)
+def test_send_recv_over_sockets_match_sync_per_env(ray_cluster, spin_us, plain_worker):
+    """Partial batches (min_envs < N) read from sockets: each env's trajectory is Gymnasium's.
+
+    ``mixed``: one worker falls back to actor calls (as a worker on another node would), so
+    recv waits on sockets and Ray object refs at once.
+    """
+    fns = uneven_fns()
+    vec = socket_env(fns, envs_per_worker=2, spin_us=spin_us)
+    try:
+        if plain_worker is not None:
+            vec._backend._disconnect(plain_worker)
+        vec.reset(seed=0)
+        vec.send(np.zeros((len(fns), 1), dtype=np.float32))
+        kinds = [type(call.handle).__name__ for _, call in sorted(vec._pending.items())]
+        want = ["SockHandle"] * 3
+        if plain_worker is not None:
+            want[plain_worker] = "ObjectRef"
+        assert kinds == want
+        vec.recv()
+        traj, acts, (batches, skew) = async_rollout(vec, STEPS, min_envs=2)
+    finally:
+        vec.close()
+    assert any(len(b) < len(fns) for b in batches) and skew >= 2
+    reference = sync_replay(fns, acts, STEPS, "NextStep")
+    for i in range(len(fns)):
+        for t, (got, want_row) in enumerate(zip(traj[i], reference[i], strict=True)):
+            assert data_equivalence(got, want_row, exact=True), f"env {i} differs at step {t}"
+
+
+def test_profiled_steps_go_over_sockets_too(ray_cluster):
     vec = socket_env(ENV_ID, NUM_ENVS, envs_per_worker=2)
     try:
         profile = vec.profile_steps()
@@ -97,14 +141,25 @@ def test_profile_and_send_recv_fall_back_to_actor_calls(ray_cluster):
         times = profile.per_step_us()
         assert profile.steps == 10 and times["compute"] > 0 and times["wait"] > 0
         vec.profile_steps(enabled=False)
-        vec.send(np.zeros((NUM_ENVS, 1), dtype=np.float32))  # plain actor calls
-        obs, *_, ids = vec.recv()
-        assert ids.tolist() == list(range(NUM_ENVS)) and np.isfinite(obs).all()
-        obs, *_ = vec.step(np.zeros((NUM_ENVS, 1), dtype=np.float32))  # back on the sockets
+        obs, *_ = vec.step(np.zeros((NUM_ENVS, 1), dtype=np.float32))
         assert np.isfinite(obs).all()
         assert len(vec.get_attr("dt")) == NUM_ENVS
     finally:
         vec.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"spin_us": -1}, r"spin_us=-1: expected None \(default 250\) or microseconds in \[0,"),
+        ({"spin_us": "fast"}, r"spin_us='fast': expected None"),
+        ({"spin_us": True}, r"spin_us=True: expected None"),
+        ({"spin_us": 10, "transport": "actor"}, r"spin_us=10 with transport='actor'"),
+    ],
+)
+def test_bad_spin_us_is_named(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        RayVectorEnv(ENV_ID, 2, **kwargs)
 
 
 def test_bogus_transport_is_a_value_error():

@@ -4,7 +4,9 @@ Observation (float64, 4): cart position, pole angle (wrapped to [-pi, pi]), cart
 pole angular velocity.
 Action (float32, 1): normalized force on the cart in [-1, 1] (10 N at 1).
 Reward: 1 per step while the pole is up. Terminated when |angle| > 0.2 rad or the
-cart leaves [-0.9, 0.9] m. Physics: ``dt`` = 2 ms, ``k`` = 10 ticks per step (50 Hz control).
+cart leaves [-0.9, 0.9] m (``terminate=False``: never, so that every step costs the same
+physics -- the throughput benchmarks use it).
+Physics: ``dt`` = 2 ms, ``k`` = 10 ticks per step (50 Hz control).
 """
 
 from __future__ import annotations
@@ -33,9 +35,13 @@ class CartPoleTask(MujocoTask):
         k: int = 10,
         max_episode_steps: int | None = 500,
         reset_noise: float = 0.05,
+        terminate: bool = True,
     ) -> None:
         if not reset_noise >= 0:
             raise ValueError(f"reset_noise={reset_noise!r}: expected a float >= 0")
+        if not isinstance(terminate, bool):
+            raise ValueError(f"terminate={terminate!r}: expected True or False")
+        self.terminate = terminate
         self.dt = dt
         self.k = k
         self.max_episode_steps = max_episode_steps
@@ -70,4 +76,6 @@ class CartPoleTask(MujocoTask):
         return 1.0
 
     def terminated(self, obs: np.ndarray) -> bool:
+        if not self.terminate:
+            return False
         return abs(obs[1]) > self.max_angle or abs(obs[0]) > self.max_position

@@ -121,8 +121,9 @@ class EnvGroup:
     def ready(self) -> bool:
         return True
 
-    def open_socket(self, path: str, driver_node: str) -> bool:
-        """On ``driver_node``: serve the barrier step at Unix socket ``path`` (else False).
+    def open_socket(self, path: str, driver_node: str, spin_us: float) -> bool:
+        """On ``driver_node``: serve steps at Unix socket ``path`` (else False), spinning
+        ``spin_us`` before each blocking read.
 
         See :mod:`chronogym.vector.socket_backend` (``transport="socket"``).
         """
@@ -132,7 +133,7 @@ class EnvGroup:
             return False
         from chronogym.vector.socket_backend import serve_socket
 
-        serve_socket(self, path)
+        serve_socket(self, path, spin_us)
         return True
 
     # -- restarts ----------------------------------------------------------------------

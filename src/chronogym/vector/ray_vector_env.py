@@ -20,7 +20,7 @@ from chronogym.vector.ray_backend import (
     ensure_ray,
     resolve_worker_cpus,
 )
-from chronogym.vector.socket_backend import SocketRayBackend
+from chronogym.vector.socket_backend import SocketRayBackend, check_spin_us
 
 TRANSPORTS = ("actor", "compiled", "socket")
 BACKENDS = {"actor": RayBackend, "compiled": CompiledRayBackend, "socket": SocketRayBackend}
@@ -71,14 +71,19 @@ class RayVectorEnv(WorkerVectorEnv):
         transport: how the barrier ``step`` reaches the workers. ``"socket"``
             (the default, ``None``, where Unix sockets exist): workers on the
             driver's node serve a Unix domain socket in a private (mode 0700)
-            temporary directory and the step's bytes go over it with blocking
-            reads (no polling; several times cheaper per step than a Ray call);
+            temporary directory and each step's bytes (``step``, ``send`` /
+            ``recv``) go over it, several times cheaper than a Ray call;
             workers on other nodes use plain calls. ``"actor"``: one plain Ray
             actor call per worker. ``"compiled"``: one Ray Compiled Graph over
             every worker (shared-memory channels; its actors poll, using CPU
             while idle). See ``benchmarks/README.md``. Box spaces only; other
-            calls, ``send`` / ``recv`` included, always use plain actor calls,
-            and faults are handled the same way with every transport.
+            calls (reset, ``call``, ...) always use plain actor calls, and
+            faults are handled the same way with every transport.
+        spin_us: ``transport="socket"`` only: µs each end of a socket spins
+            (polling, yielding its core to other processes) before it blocks
+            on a read; an answer caught while spinning saves the wake-up of
+            an idle core (~40 µs each way on a VM). Default 250; 0 never spins
+            (no CPU at all while waiting).
 
     ``step`` is one barrier over every worker. For algorithms that tolerate it,
     stepping can also be asynchronous (EnvPool-style):
@@ -125,9 +130,18 @@ class RayVectorEnv(WorkerVectorEnv):
         start_timeout: float = 120.0,
         env_kwargs: dict[str, Any] | None = None,
         transport: str | None = None,
+        spin_us: float | None = None,
     ) -> None:
         count = len(normalize_env_fns(env_fns, num_envs))
         self.transport = transport = check_transport(transport)
+        options: dict[str, Any] = {}
+        if transport == "socket":
+            options["spin_us"] = check_spin_us(spin_us)
+        elif spin_us is not None:
+            raise ValueError(
+                f"spin_us={spin_us!r} with transport={transport!r}: spin_us applies to "
+                "transport='socket' only; expected spin_us=None"
+            )
         if envs_per_worker is not None and (
             isinstance(envs_per_worker, bool)
             or not isinstance(envs_per_worker, int)
@@ -153,6 +167,7 @@ class RayVectorEnv(WorkerVectorEnv):
             start_timeout,
             step_timeout,
             scheduling=scheduling,
+            **options,
         )
         super().__init__(
             env_fns,

@@ -3,11 +3,22 @@
 Workers are the same Ray actors as with the plain transport, created and
 replaced by Ray. Once a worker is ready and runs on the driver's node, it
 serves a Unix socket in a private directory (``mkdtemp``, mode 0700: only
-this user can connect; nothing on the network) from a daemon thread. The
-barrier ``step`` of Box spaces then writes one message per worker (its action
-bytes) and reads each answer with blocking ``recv_into``: nobody polls, idle
-workers use no CPU. Everything else (reset, send / recv, call, workers on
-other nodes, non-Box spaces) uses plain actor calls.
+this user can connect; nothing on the network) from a daemon thread. Every
+step of Box spaces -- the barrier ``step`` and ``send`` / ``recv`` -- then
+writes one message per worker (its action bytes) and reads the answer from
+the socket. Everything else (reset, call, workers on other nodes, non-Box
+spaces) uses plain actor calls.
+
+Waiting: a blocked read costs a wake-up, ~40 us per direction on a virtual
+machine whose idle core must be woken, more than a cheap step. So each end
+may first *spin* (poll the socket, yielding its core to any other runnable
+process with ``sched_yield`` between polls), then block. The spin adapts
+(:class:`AdaptiveSpin`): each end spins for twice its last wait, at most
+``spin_us``, and not at all once a wait took longer than ``spin_us`` -- so
+cheap steps (and a driver that sends the next actions at once) are caught
+spinning, while dear steps and a driver that thinks between steps (a policy's
+forward pass) leave the cores to the workers. ``spin_us=0`` gives plain
+blocking reads (no CPU at all while waiting).
 
 Messages: request = ``<I B`` (action byte count, timed flag) + action bytes;
 answer = ``<B 5I`` (status, then the lengths of obs, rewards, terminations,
@@ -23,8 +34,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import os
 import pickle
+import select
 import shutil
 import socket
 import struct
@@ -46,8 +59,68 @@ ANSWER = struct.Struct("<BIIIII")  # status (0 ok, 1 failure), then 5 part lengt
 OK, FAILED = 0, 1
 ACCEPT_TIMEOUT_S = 30.0  # a worker stops listening if the driver never connects
 DEATH_PROBE_S = 10.0  # how long to ask Ray why a worker whose socket broke died
+#: Default spin before a blocking read, µs (see the module docstring); the cheap-step
+#: sweep of benchmarks/throughput.py (--spin-us) measured it.
+DEFAULT_SPIN_US = 250.0
+MIXED_POLL_S = 1e-3  # recv over socket and actor-call workers: how often to look at each
 
 logger = logging.getLogger("chronogym")
+
+
+def check_spin_us(spin_us: float | None) -> float:
+    """``spin_us`` validated (None: :data:`DEFAULT_SPIN_US`), in µs."""
+    if spin_us is None:
+        return DEFAULT_SPIN_US
+    if (
+        isinstance(spin_us, bool)
+        or not isinstance(spin_us, (int, float))
+        or not (0 <= spin_us <= 1e6)
+    ):
+        raise ValueError(
+            f"spin_us={spin_us!r}: expected None (default {DEFAULT_SPIN_US:g}) or microseconds "
+            "in [0, 1e6] to spin before a blocking socket read (0: never spin)"
+        )
+    return float(spin_us)
+
+
+class AdaptiveSpin:
+    """How long one end spins before it blocks: twice its last wait, at most ``cap_s``.
+
+    A wait longer than ``cap_s`` turns spinning off until a wait is short again.
+    """
+
+    def __init__(self, cap_s: float) -> None:
+        self.cap_s = cap_s
+        self.last_s = 0.5 * cap_s  # the first wait spins the whole cap
+        self._start = 0.0
+
+    def spin(self, poller: select.poll) -> None:
+        """Spin until readable or out of budget; the wait is timed until :meth:`arrived`."""
+        self._start = time.perf_counter()
+        if self.last_s < self.cap_s:
+            spin_until_readable(poller, min(self.cap_s, 2.0 * self.last_s))
+
+    def arrived(self) -> None:
+        """The message started arriving: remember how long this wait took."""
+        self.last_s = time.perf_counter() - self._start
+
+
+def spin_until_readable(poller: select.poll, spin_s: float) -> bool:
+    """Poll (yielding the core between polls) for up to ``spin_s``; is the socket readable?"""
+    if spin_s <= 0:
+        return False
+    end = time.perf_counter() + spin_s
+    while not poller.poll(0):
+        if time.perf_counter() >= end:
+            return False
+        os.sched_yield()
+    return True
+
+
+def _poller(sock: socket.socket) -> select.poll:
+    poller = select.poll()
+    poller.register(sock, select.POLLIN)
+    return poller
 
 
 # -- worker side ------------------------------------------------------------------------------
@@ -76,16 +149,17 @@ def encode_answer(answer: Any) -> bytes:
     return ANSWER.pack(OK, *(len(p) for p in parts)) + b"".join(parts)
 
 
-def serve_socket(group: EnvGroup, path: str) -> None:
-    """Listen at ``path`` and answer ``group``'s barrier steps from a daemon thread."""
+def serve_socket(group: EnvGroup, path: str, spin_us: float = DEFAULT_SPIN_US) -> None:
+    """Listen at ``path`` and answer ``group``'s steps from a daemon thread."""
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind(path)
     listener.listen(1)
     listener.settimeout(ACCEPT_TIMEOUT_S)
-    threading.Thread(target=_serve, args=(group, listener, path), daemon=True).start()
+    args = (group, listener, path, spin_us * 1e-6)
+    threading.Thread(target=_serve, args=args, daemon=True).start()
 
 
-def _serve(group: EnvGroup, listener: socket.socket, path: str) -> None:
+def _serve(group: EnvGroup, listener: socket.socket, path: str, spin_s: float) -> None:
     """Accept the driver (once), then answer its step requests until it hangs up."""
     try:
         conn, _ = listener.accept()
@@ -97,16 +171,19 @@ def _serve(group: EnvGroup, listener: socket.socket, path: str) -> None:
             os.unlink(path)
     with conn:
         conn.settimeout(None)
-        _serve_conn(group, conn)
+        _serve_conn(group, conn, spin_s)
 
 
-def _serve_conn(group: EnvGroup, conn: socket.socket) -> None:
+def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
     """Answer step requests until the driver hangs up (EOF) or the connection fails."""
     head = memoryview(bytearray(REQUEST.size))
     data = memoryview(bytearray(256))
+    poller, spinner = _poller(conn), AdaptiveSpin(spin_s)
     while True:
         try:
+            spinner.spin(poller)  # while stepping, the next request comes soon
             fill(conn, head, 0, REQUEST.size)
+            spinner.arrived()
             size, timed = REQUEST.unpack(head)
             if size > len(data):
                 data = memoryview(bytearray(size))
@@ -127,7 +204,7 @@ def _step_bytes(group: EnvGroup, action_bytes: memoryview, timed: bool) -> Any:
 # -- driver side ------------------------------------------------------------------------------
 @dataclass
 class SockHandle:
-    """One worker's barrier step sent over its socket; ``outcome`` once read."""
+    """One worker's step sent over its socket; ``outcome`` once read."""
 
     worker: int
     deadline: float | None
@@ -135,12 +212,16 @@ class SockHandle:
 
 
 class SocketRayBackend(RayBackend):
-    """RayBackend whose barrier step goes over Unix sockets to workers on this node."""
+    """RayBackend whose steps go over Unix sockets to workers on this node."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, spin_us: float | None = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        self.spin_us = check_spin_us(spin_us)
         self._dir: str | None = None
         self._socks: list[socket.socket | None] = []
+        self._pollers: list[select.poll | None] = []
+        self._spinners: list[AdaptiveSpin] = []
+        self._recv_spinner = AdaptiveSpin(0.0)
         self._bufs: list[bytearray] = []
         self._opened = 0  # sockets opened so far (unique file names)
 
@@ -150,6 +231,9 @@ class SocketRayBackend(RayBackend):
         self._dir = tempfile.mkdtemp(prefix="chronogym-")
         os.chmod(self._dir, 0o700)
         self._socks = [None] * len(self.actors)
+        self._pollers = [None] * len(self.actors)
+        self._spinners = [AdaptiveSpin(self.spin_us * 1e-6) for _ in self.actors]
+        self._recv_spinner = AdaptiveSpin(self.spin_us * 1e-6)
         self._bufs = [bytearray(4096) for _ in self.actors]
         self._connect(list(range(len(self.actors))))
 
@@ -171,9 +255,10 @@ class SocketRayBackend(RayBackend):
         for w in workers:
             self._opened += 1
             paths[w] = os.path.join(self._dir, f"w{w}-{self._opened}.sock")
-        refs = {w: self.actors[w].open_socket.remote(paths[w], node) for w in workers}
+        refs = {w: self.actors[w].open_socket.remote(paths[w], node, self.spin_us) for w in workers}
         for w in workers:
-            self._socks[w] = self._dial(refs[w], paths[w])
+            sock = self._socks[w] = self._dial(refs[w], paths[w])
+            self._pollers[w] = None if sock is None else _poller(sock)
 
     def _dial(self, listening: Any, path: str) -> socket.socket | None:
         """A connection to the socket a worker opened; None (plain calls) if it could not."""
@@ -194,7 +279,7 @@ class SocketRayBackend(RayBackend):
         return sock
 
     def _disconnect(self, w: int) -> None:
-        sock, self._socks[w] = self._socks[w], None
+        sock, self._socks[w], self._pollers[w] = self._socks[w], None, None
         if sock is not None:
             with contextlib.suppress(OSError):
                 sock.close()
@@ -212,26 +297,20 @@ class SocketRayBackend(RayBackend):
             shutil.rmtree(self._dir, ignore_errors=True)
             self._dir = None
 
-    # -- the barrier step -----------------------------------------------------------------
-    def submit_all(self, workers: list[int], method: str, args: list[tuple[Any, ...]]) -> list:
-        """A barrier step goes over the sockets of connected workers; anything else, plain."""
-        if method != STEP_METHOD or workers != list(range(len(self.actors))):
-            return [self.submit(w, method, *a) for w, a in zip(workers, args, strict=True)]
+    # -- steps ----------------------------------------------------------------------------
+    def submit(self, worker: int, method: str, *args: Any) -> Any:
+        """A step of a connected worker goes over its socket; anything else, plain."""
+        sock = self._socks[worker]
+        if method != STEP_METHOD or sock is None:
+            return super().submit(worker, method, *args)
         deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
-        handles: list[Any] = []
-        for w, a in zip(workers, args, strict=True):
-            sock = self._socks[w]
-            if sock is None:
-                handles.append(self.submit(w, method, *a))
-                continue
-            handle = SockHandle(w, deadline)
-            data, timed = a[0], bool(a[1]) if len(a) > 1 else False
-            try:
-                sock.sendall(REQUEST.pack(len(data), timed) + data)
-            except OSError as error:
-                handle.outcome = self._lost(w, error)
-            handles.append(handle)
-        return handles
+        handle = SockHandle(worker, deadline)
+        data, timed = args[0], bool(args[1]) if len(args) > 1 else False
+        try:
+            sock.sendall(REQUEST.pack(len(data), timed) + data)
+        except OSError as error:
+            handle.outcome = self._lost(worker, error)
+        return handle
 
     def _lost(self, w: int, error: BaseException) -> Outcome:
         """Worker ``w``'s socket failed: the worker is lost (Ray's reason, when it has one)."""
@@ -263,13 +342,17 @@ class SocketRayBackend(RayBackend):
         return handle.outcome
 
     def _read(self, w: int, deadline: float | None) -> Outcome:
-        """One answer from worker ``w``'s socket, with blocking ``recv_into``."""
-        sock = self._socks[w]
-        assert sock is not None
+        """One answer from worker ``w``'s socket: spin, then blocking ``recv_into``."""
+        sock, poller = self._socks[w], self._pollers[w]
+        if sock is None or poller is None:
+            raise EOFError(f"worker {w}'s socket was closed before its answer came")
+        spinner = self._spinners[w]
+        spinner.spin(poller)
         if deadline is not None:
             sock.settimeout(max(deadline - time.monotonic(), 1e-3))
         view = memoryview(self._bufs[w])
         got = fill(sock, view, 0, ANSWER.size)
+        spinner.arrived()
         status, *sizes = ANSWER.unpack_from(view)
         total = ANSWER.size + sum(sizes)
         if total > len(view):  # grow the buffer, keeping what was read
@@ -279,6 +362,15 @@ class SocketRayBackend(RayBackend):
             view = memoryview(bigger)
         fill(sock, view, got, total)
         return decode_answer(status, sizes, view)
+
+    def _answered(self, handle: SockHandle) -> bool:
+        """Has ``handle``'s worker answered (or hung up)? Reads the answer if so."""
+        if handle.outcome is None:
+            poller = self._pollers[handle.worker]
+            if poller is not None and not poller.poll(0):
+                return False
+            self._resolve(handle)
+        return True
 
     def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]:
         refs = [(k, h) for k, h in enumerate(handles) if not isinstance(h, SockHandle)]
@@ -292,15 +384,47 @@ class SocketRayBackend(RayBackend):
         return outcomes  # type: ignore[return-value]
 
     def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]:
-        if not any(isinstance(h, SockHandle) for h in handles):
+        """Indices of ``handles`` that have answered: sockets by ``poll``, calls by ``ray.wait``."""
+        socks = {k: h for k, h in enumerate(handles) if isinstance(h, SockHandle)}
+        if not socks:
             return super().wait(handles, num_returns, timeout)
-        for h in handles:  # a barrier step: read every socket's answer
-            if isinstance(h, SockHandle):
+        refs = {k: h for k, h in enumerate(handles) if k not in socks}
+        if num_returns == len(handles) and timeout is None:  # a barrier: read every answer
+            for h in socks.values():
                 self._resolve(h)
-        refs = [h for h in handles if not isinstance(h, SockHandle)]
-        if refs:
-            super().wait(refs, len(refs), timeout)
-        return list(range(len(handles)))
+            if refs:
+                super().wait(list(refs.values()), len(refs), None)
+            return list(range(len(handles)))
+        deadline = None if timeout is None else time.monotonic() + timeout
+        done: set[int] = set()
+        spinner: AdaptiveSpin | None = self._recv_spinner
+        while True:
+            done |= {k for k, h in socks.items() if k not in done and self._answered(h)}
+            if refs:
+                ready = super().wait(list(refs.values()), len(refs), 0)
+                done |= {list(refs)[i] for i in ready}
+            if len(done) >= num_returns or (deadline is not None and time.monotonic() >= deadline):
+                return sorted(done)
+            budget = None if deadline is None else max(0.0, deadline - time.monotonic())
+            if refs:
+                budget = MIXED_POLL_S if budget is None else min(budget, MIXED_POLL_S)
+            self._poll([h.worker for k, h in socks.items() if k not in done], spinner, budget)
+            spinner = None  # spin once per wait
+
+    def _poll(
+        self, workers: list[int], spinner: AdaptiveSpin | None, timeout: float | None
+    ) -> None:
+        """Until one of ``workers``' sockets is readable or ``timeout``: spin, then block."""
+        poller = select.poll()
+        for w in workers:
+            sock = self._socks[w]
+            if sock is not None:
+                poller.register(sock, select.POLLIN)
+        if spinner is not None:
+            spinner.spin(poller)
+        ready = poller.poll(None if timeout is None else math.ceil(timeout * 1000))
+        if spinner is not None and ready:
+            spinner.arrived()
 
 
 def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
