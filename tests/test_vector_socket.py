@@ -165,3 +165,37 @@ def test_bad_spin_us_is_named(kwargs, match):
 def test_bogus_transport_is_a_value_error():
     with pytest.raises(ValueError, match=r"transport='bogus': expected one of .*'socket'"):
         RayVectorEnv(ENV_ID, 2, transport="bogus")
+
+
+class CountingPoller:
+    """A poll object that is never readable and counts how often it was asked."""
+
+    def __init__(self) -> None:
+        self.polls = 0
+
+    def poll(self, timeout):
+        self.polls += 1
+        return []
+
+
+def test_adaptive_spin_follows_the_last_wait():
+    from chronogym.vector.socket_backend import AdaptiveSpin
+
+    spinner = AdaptiveSpin(cap_s=1e-3)
+    first = CountingPoller()
+    spinner.spin(first)  # the first wait spins (then the caller blocks)
+    assert first.polls > 1
+    spinner.last_s = 5e-3  # a wait longer than the cap: spinning turns off
+    off = CountingPoller()
+    spinner.spin(off)
+    assert off.polls == 0
+    spinner.last_s = 1e-4  # a short wait again: it spins
+    again = CountingPoller()
+    spinner.spin(again)
+    assert again.polls > 1
+    spinner.arrived()
+    assert 0 <= spinner.last_s < 1.0
+    never = AdaptiveSpin(cap_s=0.0)  # spin_us=0
+    zero = CountingPoller()
+    never.spin(zero)
+    assert zero.polls == 0
