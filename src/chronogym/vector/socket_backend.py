@@ -59,8 +59,8 @@ ANSWER = struct.Struct("<BIIIII")  # status (0 ok, 1 failure), then 5 part lengt
 OK, FAILED = 0, 1
 ACCEPT_TIMEOUT_S = 30.0  # a worker stops listening if the driver never connects
 DEATH_PROBE_S = 10.0  # how long to ask Ray why a worker whose socket broke died
-#: Default spin before a blocking read, µs (see the module docstring); the cheap-step
-#: sweep of benchmarks/throughput.py (--spin-us) measured it.
+#: Default cap on the spin before a blocking read, µs (see the module docstring);
+#: chosen with benchmarks/socket_spin.py.
 DEFAULT_SPIN_US = 250.0
 MIXED_POLL_S = 1e-3  # recv over socket and actor-call workers: how often to look at each
 
