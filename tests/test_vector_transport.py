@@ -1,4 +1,4 @@
-"""RayVectorEnv transports ("actor", "compiled"): same numbers, same fault handling.
+"""RayVectorEnv transports: same numbers (compiled), the same fault handling (all three).
 
 Real Ray (2 CPUs), real MuJoCo cart-pole.
 """
@@ -50,11 +50,21 @@ def test_compiled_profile_and_send_recv_fallback(ray_cluster):
         vec.close()
 
 
-@pytest.mark.parametrize("transport", ["actor", "compiled"])
-def test_killed_worker_is_replaced(ray_cluster, transport):
+@pytest.mark.parametrize(
+    ("transport", "mode"),
+    [
+        ("socket", "NextStep"),
+        ("socket", "SameStep"),
+        ("actor", "NextStep"),
+        ("compiled", "NextStep"),
+    ],
+)
+def test_killed_worker_is_replaced(ray_cluster, transport, mode):
     kill_step = 15
-    undisturbed = vector_rollout(SerialVectorEnv(ENV_ID, NUM_ENVS), STEPS)
-    vec = RayVectorEnv(ENV_ID, NUM_ENVS, envs_per_worker=2, transport=transport)
+    undisturbed = vector_rollout(SerialVectorEnv(ENV_ID, NUM_ENVS, autoreset_mode=mode), STEPS)
+    vec = RayVectorEnv(
+        ENV_ID, NUM_ENVS, envs_per_worker=2, autoreset_mode=mode, transport=transport
+    )
     try:
         old_pids = vec.worker_pids()
         run = vector_rollout(vec, STEPS, kill=kill_at(old_pids[1], kill_step))
@@ -63,6 +73,12 @@ def test_killed_worker_is_replaced(ray_cluster, transport):
         _, rewards, terminated, truncated, info = run[kill_step + 1]
         assert truncated[2:].all() and not terminated[2:].any() and (rewards[2:] == 0).all()
         assert info["worker_restarted"][2:].all() and not info["_worker_restarted"][:2].any()
+        if transport == "socket":
+            assert all(vec._backend.connected())  # the replacement serves a socket again
+            error = info["worker_error"][2]
+            assert "ActorDiedError" in error and "socket" in error
+        if mode == "SameStep":
+            np.testing.assert_array_equal(info["final_obs"][2], run[kill_step][0][2])
         assert [i for i, _ in vec.restarts] == [2, 3]
         for got, want in zip(run, undisturbed, strict=True):  # the other worker: unaffected
             np.testing.assert_array_equal(got[0][:2], want[0][:2])

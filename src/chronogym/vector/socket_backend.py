@@ -389,11 +389,12 @@ class SocketRayBackend(RayBackend):
         if not socks:
             return super().wait(handles, num_returns, timeout)
         refs = {k: h for k, h in enumerate(handles) if k not in socks}
+        ref_keys, ref_handles = list(refs), list(refs.values())
         if num_returns == len(handles) and timeout is None:  # a barrier: read every answer
             for h in socks.values():
                 self._resolve(h)
             if refs:
-                super().wait(list(refs.values()), len(refs), None)
+                super().wait(ref_handles, len(refs), None)
             return list(range(len(handles)))
         deadline = None if timeout is None else time.monotonic() + timeout
         done: set[int] = set()
@@ -401,8 +402,7 @@ class SocketRayBackend(RayBackend):
         while True:
             done |= {k for k, h in socks.items() if k not in done and self._answered(h)}
             if refs:
-                ready = super().wait(list(refs.values()), len(refs), 0)
-                done |= {list(refs)[i] for i in ready}
+                done |= {ref_keys[i] for i in super().wait(ref_handles, len(refs), 0)}
             if len(done) >= num_returns or (deadline is not None and time.monotonic() >= deadline):
                 return sorted(done)
             budget = None if deadline is None else max(0.0, deadline - time.monotonic())
