@@ -3,7 +3,8 @@
 With ``transport="socket"`` each end of a worker's socket polls for up to ``spin_us``
 (yielding its core between polls) before a blocking read. A blocked read costs the
 wake-up of an idle core, ~40 µs each way on a virtual machine, which is more than a cheap
-MuJoCo step; spinning costs CPU while nothing arrives. This script times the barrier
+MuJoCo step; spinning costs CPU while nothing arrives. This script first times a bare
+socketpair round trip between two processes, blocking and spinning, then the barrier
 ``step`` of ``chronogym/CartPole-v0`` for several ``spin_us`` values, shapes and physics
 costs, with and without "think" time on the driver between steps (busy work standing in
 for a policy's forward pass, when a spinning worker gives up and blocks), and the CPU the
@@ -24,6 +25,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import select
+import socket
 import statistics
 import time
 from dataclasses import asdict, dataclass
@@ -147,6 +151,41 @@ def measure(shape: Shape, spin_us: float, args: argparse.Namespace) -> list[dict
         env.close()
 
 
+def pingpong_us(spin_s: float, rounds: int = 5000) -> float:
+    """µs per round trip of 32 bytes between two processes over a Unix socketpair, each end
+    spinning up to ``spin_s`` before a blocking read (what the socket transport does)."""
+    from chronogym.vector.socket_backend import spin_until_readable
+
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    pid = os.fork()
+    if pid == 0:  # the echoing end
+        ours.close()
+        poller, buf = select.poll(), bytearray(64)
+        poller.register(theirs, select.POLLIN)
+        while True:
+            spin_until_readable(poller, spin_s)
+            n = theirs.recv_into(buf)
+            if n == 0:
+                os._exit(0)
+            theirs.sendall(buf[:n])
+    theirs.close()
+    poller, buf, message = select.poll(), bytearray(64), b"x" * 32
+    poller.register(ours, select.POLLIN)
+    for _ in range(200):  # warm-up
+        ours.sendall(message)
+        spin_until_readable(poller, spin_s)
+        ours.recv_into(buf)
+    start = time.perf_counter()
+    for _ in range(rounds):
+        ours.sendall(message)
+        spin_until_readable(poller, spin_s)
+        ours.recv_into(buf)
+    elapsed = time.perf_counter() - start
+    ours.close()
+    os.waitpid(pid, 0)
+    return elapsed / rounds * 1e6
+
+
 def physics_us(k: int, seed: int) -> float:
     """What one env step of ``k`` ticks costs in the raw loop, µs."""
     steps, elapsed = throughput.run_raw(k, 0.5, seed)
@@ -220,6 +259,11 @@ def main(argv: list[str] | None = None) -> int:
     """Run the sweep, print the table, write the JSON."""
     args = parse_args(argv)
     wall = time.perf_counter()
+    pingpong = {"blocking": pingpong_us(0.0), "spinning_1ms": pingpong_us(1e-3)}
+    print(
+        f"socketpair round trip between two processes: {pingpong['blocking']:.1f} µs with "
+        f"blocking reads, {pingpong['spinning_1ms']:.1f} µs when both ends spin\n"
+    )
     throughput.start_ray()
     rows = run(args)
     print(format_table(rows))
@@ -230,6 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     record = {
         "benchmark": "socket transport spin before blocking reads",
         "machine": throughput.machine_info(),
+        "pingpong_us": pingpong,
         "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
         "rows": [asdict(r) for r in rows],
     }
