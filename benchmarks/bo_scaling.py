@@ -243,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     import optuna
     from tqdm import tqdm
 
-    from chronogym.vector.ray_backend import ensure_ray
+    from chronogym.ray_runtime import ensure_ray
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     ensure_ray(args.address)

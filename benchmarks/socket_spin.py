@@ -154,7 +154,7 @@ def measure(shape: Shape, spin_us: float, args: argparse.Namespace) -> list[dict
 def pingpong_us(spin_s: float, rounds: int = 5000) -> float:
     """µs per round trip of 32 bytes between two processes over a Unix socketpair, each end
     spinning up to ``spin_s`` before a blocking read (what the socket transport does)."""
-    from chronogym.vector.socket_backend import spin_until_readable
+    from chronogym.vector.socket_transport import spin_until_readable
 
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
     pid = os.fork()

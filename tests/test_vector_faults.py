@@ -97,7 +97,7 @@ def test_crash_loop_becomes_a_clear_error():
             vec.step(actions)
 
 
-@pytest.mark.parametrize("transport", ["actor", "socket", "compiled"])
+@pytest.mark.parametrize("transport", ["actor", "socket"])
 def test_hung_worker_is_replaced_after_step_timeout(ray_cluster, transport):
     from faulty_tasks import HangingCartPole
 

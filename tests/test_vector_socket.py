@@ -152,7 +152,7 @@ class CountingPoller:
 
 
 def test_adaptive_spin_follows_the_last_wait():
-    from chronogym.vector.socket_backend import AdaptiveSpin
+    from chronogym.vector.socket_transport import AdaptiveSpin
 
     spinner = AdaptiveSpin(cap_s=1e-3)
     first = CountingPoller()

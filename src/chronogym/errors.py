@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from gymnasium.error import ClosedEnvironmentError
+
 
 class ChronogymError(Exception):
     """Base class of every error chronogym raises on purpose."""
@@ -17,3 +19,7 @@ class WorkerCrashLoopError(ChronogymError, RuntimeError):
 
 class WorkerCallError(ChronogymError, RuntimeError):
     """A call to a vector-env worker failed (the worker is replaced, the call is not retried)."""
+
+
+class VectorEnvClosedError(ChronogymError, ClosedEnvironmentError, RuntimeError):
+    """A closed vector env was used (Gymnasium's ``ClosedEnvironmentError``)."""

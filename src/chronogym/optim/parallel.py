@@ -144,7 +144,7 @@ class _RayPool:
     ) -> None:
         import ray
 
-        from chronogym.vector.ray_backend import (
+        from chronogym.ray_runtime import (
             actor_scheduling,
             ensure_ray,
             resolve_worker_cpus,
@@ -184,7 +184,7 @@ class _RayPool:
     def replace(self, worker: int) -> None:
         import contextlib
 
-        from chronogym.vector.ray_backend import start_with_retries
+        from chronogym.ray_runtime import start_with_retries
 
         with contextlib.suppress(Exception):
             self.ray.kill(self.actors[worker], no_restart=True)
@@ -276,7 +276,7 @@ def run_parallel_study(
         raise ValueError(f"max_retries={max_retries!r}: expected an integer >= 0")
     if trial_timeout is not None and not trial_timeout > 0:
         raise ValueError(f"trial_timeout={trial_timeout!r}: expected None or seconds > 0")
-    from chronogym.vector.ray_backend import actor_scheduling
+    from chronogym.ray_runtime import actor_scheduling
 
     actor_scheduling(scheduling)  # validates it
 

@@ -1,44 +1,76 @@
-"""Splitting batched actions and joining batched observations across workers."""
+"""Splitting batched actions into per-env actions and joining per-env results into batches.
+
+Everything goes through ``gymnasium.vector.utils`` (``batch_space``, ``iterate``,
+``concatenate``, ``create_empty_array``), as in Gymnasium's own vector envs, so
+every space type batches exactly as there. The one fast path: Box actions and
+observations travel between driver and workers as raw bytes (see
+:mod:`chronogym.vector.wire`), and their batches are joined with
+``np.concatenate``.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import VectorEnv
+from gymnasium.vector.utils import concatenate, create_empty_array, iterate
 
 
-def slice_batch(batch: Any, start: int, stop: int) -> Any:
-    """Rows ``start:stop`` of a batched structure (array, dict or tuple of arrays)."""
-    if isinstance(batch, dict):
-        return {key: slice_batch(value, start, stop) for key, value in batch.items()}
-    if isinstance(batch, tuple):
-        return tuple(slice_batch(value, start, stop) for value in batch)
-    return batch[start:stop]
-
-
-def concat_batches(space: spaces.Space, parts: list[Any]) -> Any:
-    """Join per-worker batches of ``space`` observations into one batch."""
-    if isinstance(space, spaces.Dict):
-        return {
-            key: concat_batches(sub, [part[key] for part in parts])
-            for key, sub in space.spaces.items()
-        }
-    if isinstance(space, spaces.Tuple):
-        return tuple(
-            concat_batches(sub, [part[i] for part in parts]) for i, sub in enumerate(space.spaces)
+def split_actions(batched: spaces.Space, actions: Any, count: int) -> list[Any]:
+    """``actions``, a batch of ``batched`` (``batch_space`` of one env's action space for
+    ``count`` envs), as one action per env."""
+    try:
+        rows = list(iterate(batched, actions))
+    except Exception as error:
+        raise ValueError(
+            f"actions {_show(actions)} are not a batch of {count} actions: {error}; "
+            f"expected an element of {batched}"
+        ) from None
+    if len(rows) != count:
+        raise ValueError(
+            f"got {len(rows)} actions for {count} envs; expected one action per env "
+            f"(an element of {batched})"
         )
-    if isinstance(space, (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)):
-        return np.concatenate(parts, axis=0)
-    return tuple(item for part in parts for item in part)
+    return rows
 
 
-def take_rows(batch: Any, rows: np.ndarray) -> Any:
-    """Rows ``rows`` (in that order) of a batched structure (array, dict or tuple of arrays)."""
-    if isinstance(batch, dict):
-        return {key: take_rows(value, rows) for key, value in batch.items()}
-    if isinstance(batch, tuple):
-        return tuple(take_rows(value, rows) for value in batch)
-    if isinstance(batch, np.ndarray):
-        return batch[rows]
-    return [batch[int(i)] for i in rows]
+def join_obs(space: spaces.Space, parts: Sequence[Any]) -> Any:
+    """One batch from per-worker parts: packed arrays (Box rows) or lists of per-env obs."""
+    if all(isinstance(part, np.ndarray) for part in parts):
+        return np.concatenate(parts)
+    items = [row for part in parts for row in part]
+    return concatenate(space, items, create_empty_array(space, len(items), fn=np.zeros))
+
+
+def rows_of(part: Any) -> list[Any]:
+    """A worker's part as one observation per env (packed rows are copied)."""
+    if isinstance(part, np.ndarray):
+        return [row.copy() for row in part]
+    return list(part)
+
+
+class _InfoBatch:
+    """Gymnasium's vector-info layout (``VectorEnv._add_info``) for ``num_envs`` rows."""
+
+    _add_info = VectorEnv._add_info
+
+    def __init__(self, num_envs: int) -> None:
+        self.num_envs = num_envs
+
+
+def batch_infos(infos_per_env: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Per-env info dicts as one vector info (arrays plus ``_key`` masks), Gymnasium-style."""
+    batch = _InfoBatch(len(infos_per_env))
+    infos: dict[str, Any] = {}
+    for i, info in enumerate(infos_per_env):
+        if info:
+            infos = batch._add_info(infos, info, i)
+    return infos
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."

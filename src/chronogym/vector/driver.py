@@ -21,7 +21,7 @@ import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -29,32 +29,28 @@ from gymnasium.error import NoAsyncCallError
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from chronogym.actions import check_invalid_action_mode, prepare_action
-from chronogym.errors import WorkerCallError, WorkerCrashLoopError
+from chronogym.actions import check_invalid_action_mode, prepare_box_action
+from chronogym.errors import VectorEnvClosedError, WorkerCallError, WorkerCrashLoopError
 from chronogym.seeding import restart_seed, vector_seeds
-from chronogym.vector.batching import concat_batches, slice_batch, take_rows
-from chronogym.vector.group import DisabledAutoresetError, EnvFactory, Restart
+from chronogym.vector.batching import batch_infos, join_obs, rows_of, split_actions
+from chronogym.vector.checks import (
+    check_envs_per_worker,
+    check_max_restarts,
+    check_min_envs,
+    check_reset_mask,
+    normalize_env_fns,
+)
 from chronogym.vector.pending import (
     EnvsInFlightError,
     PendingCall,
     RecvTimeoutError,
-    batch_infos,
     check_env_ids,
     workers_of,
 )
 from chronogym.vector.profile import StepProfile, now
+from chronogym.vector.wire import Backend, DisabledAutoresetError, EnvFactory, Outcome, Restart
 
 logger = logging.getLogger("chronogym")
-
-
-@dataclass
-class Outcome:
-    """What one worker call gave back: a value, or the error that replaced it."""
-
-    ok: bool
-    value: Any = None
-    error: str = ""
-    lost: bool = False  # the worker process is gone or stopped answering
 
 
 @dataclass
@@ -66,60 +62,6 @@ class StepPart:
     terminations: np.ndarray
     truncations: np.ndarray
     infos: list[dict[str, Any]]
-
-
-class Backend(Protocol):
-    """Where EnvGroups live: in this process, or in Ray actors."""
-
-    def start(self, group_kwargs: list[dict[str, Any]]) -> None: ...
-    def replace(self, worker: int, kwargs: dict[str, Any]) -> None: ...
-    def submit(self, worker: int, method: str, *args: Any) -> Any: ...
-    def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]: ...
-    def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]: ...
-    def pid(self, worker: int) -> int: ...
-    def shutdown(self) -> None: ...
-
-
-def normalize_env_fns(
-    env_fns: str | EnvFactory | Sequence[str | EnvFactory], num_envs: int | None
-) -> list[str | EnvFactory]:
-    """One factory (or registered id) per env, from the forms Gymnasium users know."""
-    if isinstance(env_fns, str) or callable(env_fns):
-        if num_envs is None:
-            raise ValueError("num_envs is required when a single env id or factory is given")
-        count = num_envs
-        fns: list[str | EnvFactory] = [env_fns] * max(count, 0)  # type: ignore[list-item]
-    elif isinstance(env_fns, Sequence):
-        fns = list(env_fns)
-        count = len(fns) if num_envs is None else num_envs
-        if num_envs is not None and num_envs != len(fns):
-            raise ValueError(f"num_envs={num_envs} but {len(fns)} env factories were given")
-        for i, fn in enumerate(fns):
-            if not (isinstance(fn, str) or callable(fn)):
-                raise TypeError(f"env_fns[{i}]={fn!r}: expected a callable or an env id string")
-    else:
-        raise TypeError(
-            f"env_fns={env_fns!r}: expected an env id, a factory, or a list of factories"
-        )
-    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        raise ValueError(f"num_envs={count!r}: expected an integer >= 1")
-    return fns
-
-
-def check_envs_per_worker(envs_per_worker: int, num_envs: int) -> int:
-    """Validate ``envs_per_worker`` against ``num_envs``."""
-    if (
-        isinstance(envs_per_worker, bool)
-        or not isinstance(envs_per_worker, (int, np.integer))
-        or envs_per_worker < 1
-    ):
-        raise ValueError(f"envs_per_worker={envs_per_worker!r}: expected an integer >= 1")
-    if envs_per_worker > num_envs:
-        raise ValueError(
-            f"envs_per_worker={envs_per_worker} is larger than num_envs={num_envs}; "
-            f"expected 1 <= envs_per_worker <= {num_envs}"
-        )
-    return int(envs_per_worker)
 
 
 class WorkerVectorEnv(VectorEnv):
@@ -142,11 +84,7 @@ class WorkerVectorEnv(VectorEnv):
         self.envs_per_worker = check_envs_per_worker(envs_per_worker, self.num_envs)
         self.autoreset_mode = AutoresetMode(autoreset_mode)
         check_invalid_action_mode(invalid_action)
-        if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < -1:
-            raise ValueError(
-                f"max_restarts={max_restarts!r}: expected an integer >= 0, or -1 for no limit"
-            )
-        self.max_restarts = max_restarts
+        self.max_restarts = check_max_restarts(max_restarts)
         self.invalid_action = invalid_action
         self.closed = False
         self._backend = backend
@@ -168,9 +106,10 @@ class WorkerVectorEnv(VectorEnv):
         self.action_space = batch_space(act_space, self.num_envs)
         self.metadata = {**metadata, "autoreset_mode": self.autoreset_mode}
         self.render_mode = render_mode
-        self._last_parts: list[Any] = [None] * self.num_workers
+        self._last_parts: list[Any] = [None] * self.num_workers  # obs rows of each worker
         self._pending: dict[int, PendingCall] = {}  # worker -> its call in flight
         self._packed = isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
+        self._action_batches = {self.num_envs: self.action_space}  # batch_space by env count
         self.profile: StepProfile | None = None  # see profile_steps()
 
     # -- workers -----------------------------------------------------------------------
@@ -211,10 +150,6 @@ class WorkerVectorEnv(VectorEnv):
         return self._backend.gather(workers, self._submit_all(workers, method, args))
 
     def _submit_all(self, workers: list[int], method: str, args: list[tuple[Any, ...]]) -> list:
-        """One call per worker; a backend with ``submit_all`` issues them together."""
-        submit_all = getattr(self._backend, "submit_all", None)
-        if submit_all is not None:
-            return submit_all(workers, method, args)
         return [self._backend.submit(w, method, *a) for w, a in zip(workers, args, strict=True)]
 
     def _count_restart(self, env_index: int, error: str) -> None:
@@ -284,7 +219,7 @@ class WorkerVectorEnv(VectorEnv):
         mask = None
         if options is not None and "reset_mask" in options:
             options = dict(options)
-            mask = _check_reset_mask(options.pop("reset_mask"), self.num_envs)
+            mask = check_reset_mask(options.pop("reset_mask"), self.num_envs)
         for i, s in enumerate(seeds):
             if s is not None and (mask is None or mask[i]):
                 self._seed_roots[i] = s
@@ -310,11 +245,9 @@ class WorkerVectorEnv(VectorEnv):
             raise RuntimeError("step() called before reset(); call reset() first")
         if self.profile is not None:
             return self._step_profiled(actions, self.profile)
-        actions = prepare_action(
-            actions, self.single_action_space, self.num_envs, self.invalid_action
-        )
         workers = list(range(self.num_workers))
-        outcomes = self._call_all(workers, self._step_method, self._step_args(workers, actions))
+        args = self._step_args(workers, actions)
+        outcomes = self._call_all(workers, self._step_method, args)
         results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
         return self._join_results(workers, results)
 
@@ -330,9 +263,6 @@ class WorkerVectorEnv(VectorEnv):
     def _step_profiled(self, actions: Any, profile: StepProfile) -> tuple:
         """``step`` with each phase timed into ``profile`` (same numbers as ``step``)."""
         marks = [now()]
-        actions = prepare_action(
-            actions, self.single_action_space, self.num_envs, self.invalid_action
-        )
         workers = list(range(self.num_workers))
         args = self._step_args(workers, actions)
         marks.append(now())
@@ -353,20 +283,37 @@ class WorkerVectorEnv(VectorEnv):
     def _step_method(self) -> str:
         return "step_packed" if self._packed else "step"
 
-    def _step_args(self, workers: list[int], actions: Any) -> list[tuple[Any, ...]]:
-        """One argument tuple per worker from ``actions``: the rows of those workers' envs."""
-        offsets, start = [], 0
+    def _step_args(
+        self, workers: list[int], actions: Any, order: np.ndarray | None = None
+    ) -> list[tuple[Any, ...]]:
+        """One argument tuple per worker: the actions of its envs, checked.
+
+        ``actions`` is a batch with one row per env of ``workers``, in env order,
+        or in the order whose ``argsort`` is ``order``.
+        """
+        offsets, count = [], 0
         for w in workers:
             lo, hi = self._slices[w]
-            offsets.append((start, start + hi - lo))
-            start += hi - lo
+            offsets.append((count, count + hi - lo))
+            count += hi - lo
         if self._packed:
-            data = actions.tobytes()
-            row = len(data) // start
+            space = self.single_action_space
+            array = prepare_box_action(actions, space, count, self.invalid_action)  # type: ignore[arg-type]
+            data = (array if order is None else array[order]).tobytes()
+            row = len(data) // count
             if self.profile is not None:  # ask the workers for their timings too
                 return [(data[a * row : b * row], True) for a, b in offsets]
             return [(data[a * row : b * row],) for a, b in offsets]
-        return [(slice_batch(actions, a, b),) for a, b in offsets]
+        rows = split_actions(self._action_batch(count), actions, count)
+        if order is not None:
+            rows = [rows[k] for k in order]
+        return [(rows[a:b],) for a, b in offsets]
+
+    def _action_batch(self, count: int) -> spaces.Space:
+        """The action space of ``count`` envs (``batch_space``, made once per count)."""
+        if count not in self._action_batches:
+            self._action_batches[count] = batch_space(self.single_action_space, count)
+        return self._action_batches[count]
 
     def _step_result(self, w: int, outcome: Outcome) -> StepPart:
         """Worker ``w``'s part of a step; a failed worker is replaced and reported truncated."""
@@ -399,7 +346,7 @@ class WorkerVectorEnv(VectorEnv):
     def _restart_during_step(self, w: int, error: str) -> tuple[Any, list[dict[str, Any]]]:
         lo, hi = self._slices[w]
         last_part = self._last_parts[w]
-        last_rows = [_row_of(last_part, j) for j in range(hi - lo)]
+        last_rows = rows_of(last_part)
         seeds = self._replace_worker(w, error)
         flags = {"worker_restarted": True, "worker_error": error}
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
@@ -438,9 +385,8 @@ class WorkerVectorEnv(VectorEnv):
         ]
         if unreset:
             raise RuntimeError(f"send() to envs {unreset} before their first reset(); reset first")
-        actions = prepare_action(actions, self.single_action_space, len(ids), self.invalid_action)
-        actions = take_rows(actions, np.argsort(ids, kind="stable"))
-        self._submit("step", workers, self._step_args(workers, actions))
+        order = np.argsort(ids, kind="stable")
+        self._submit("step", workers, self._step_args(workers, actions, order))
 
     def step_async(self, actions: Any) -> None:
         """Start stepping every env (Gymnasium ``AsyncVectorEnv`` semantics); see step_wait."""
@@ -498,7 +444,7 @@ class WorkerVectorEnv(VectorEnv):
                 "async_reset() first",
                 "step",
             )
-        need = self._check_min_envs(min_envs)
+        need = check_min_envs(min_envs, len(self.envs_in_flight))
         outcomes = self._await(need, timeout)
         workers = sorted(outcomes)
         calls = {w: self._pending.pop(w) for w in workers}
@@ -513,21 +459,6 @@ class WorkerVectorEnv(VectorEnv):
                 "expected no envs in flight: recv() them first",
                 what,
             )
-
-    def _check_min_envs(self, min_envs: int | None) -> int:
-        in_flight = len(self.envs_in_flight)
-        if min_envs is None:
-            return in_flight
-        if (
-            isinstance(min_envs, bool)
-            or not isinstance(min_envs, (int, np.integer))
-            or not 1 <= min_envs <= in_flight
-        ):
-            raise ValueError(
-                f"min_envs={min_envs!r}: expected an integer with 1 <= min_envs <= {in_flight} "
-                "(the envs in flight)"
-            )
-        return int(min_envs)
 
     def _submit(self, kind: str, workers: list[int], args: list[tuple[Any, ...]]) -> None:
         method = self._step_method if kind == "step" else kind
@@ -604,7 +535,7 @@ class WorkerVectorEnv(VectorEnv):
 
     # -- joining -----------------------------------------------------------------------
     def _join_obs(self) -> Any:
-        return concat_batches(self.single_observation_space, self._last_parts)
+        return join_obs(self.single_observation_space, self._last_parts)
 
     def _join_infos(self, infos_per_env: list[dict[str, Any]]) -> dict[str, Any]:
         return batch_infos(infos_per_env)
@@ -613,7 +544,7 @@ class WorkerVectorEnv(VectorEnv):
         """(obs, rewards, terminations, truncations, infos) of ``workers``, in order."""
         space = self.single_observation_space
         return (
-            concat_batches(space, [r.obs for r in results]),
+            join_obs(space, [r.obs for r in results]),
             np.concatenate([r.rewards for r in results]).astype(np.float64, copy=False),
             np.concatenate([r.terminations for r in results]).astype(np.bool_, copy=False),
             np.concatenate([r.truncations for r in results]).astype(np.bool_, copy=False),
@@ -661,6 +592,16 @@ class WorkerVectorEnv(VectorEnv):
             )
         raise outcome.value
 
+    @property
+    def np_random_seed(self) -> tuple[int, ...]:
+        """Each env's ``np_random_seed``, in env order (as Gymnasium's vector envs)."""
+        return self.get_attr("np_random_seed")
+
+    @property
+    def np_random(self) -> tuple[np.random.Generator, ...]:
+        """Each env's ``np_random`` generator, in env order (a copy: workers own theirs)."""
+        return self.get_attr("np_random")
+
     def render(self) -> tuple[Any, ...] | None:
         """Frames of every env (``render_mode='rgb_array'``)."""
         return self.call("render")
@@ -678,7 +619,7 @@ class WorkerVectorEnv(VectorEnv):
 
     def _check_open(self) -> None:
         if self.closed:
-            raise RuntimeError(f"{type(self).__name__} is closed; create a new one")
+            raise VectorEnvClosedError(f"{type(self).__name__} is closed; create a new one")
 
     def __del__(self) -> None:
         try:
@@ -686,31 +627,6 @@ class WorkerVectorEnv(VectorEnv):
                 self.close()
         except Exception:
             pass
-
-
-def _row_of(part: Any, j: int) -> Any:
-    """Row ``j`` of a batch, copied (dict and tuple batches of arrays recurse)."""
-    if isinstance(part, dict):
-        return {key: _row_of(value, j) for key, value in part.items()}
-    if isinstance(part, tuple) and part and all(isinstance(v, np.ndarray) for v in part):
-        return tuple(_row_of(value, j) for value in part)
-    if isinstance(part, np.ndarray):
-        return np.array(part[j], copy=True)
-    return part[j]
-
-
-def _check_reset_mask(reset_mask: Any, num_envs: int) -> np.ndarray:
-    if not isinstance(reset_mask, np.ndarray):
-        raise TypeError(f"options['reset_mask'] must be a numpy array, got {type(reset_mask)}")
-    if reset_mask.shape != (num_envs,):
-        raise ValueError(
-            f"options['reset_mask'] has shape {reset_mask.shape}; expected ({num_envs},)"
-        )
-    if reset_mask.dtype != np.bool_:
-        raise TypeError(f"options['reset_mask'] has dtype {reset_mask.dtype}; expected bool")
-    if not reset_mask.any():
-        raise ValueError("options['reset_mask'] must contain at least one True value")
-    return reset_mask
 
 
 def _passed(deadline: float | None) -> bool:

@@ -13,12 +13,10 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
-import pickle
 import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -27,8 +25,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import concatenate, create_empty_array
 
 from chronogym.seeding import restart_seed
-
-EnvFactory = Callable[[], gym.Env]
+from chronogym.vector.wire import DisabledAutoresetError, EnvFactory, Restart
 
 
 def locked(method: Callable[..., Any]) -> Callable[..., Any]:
@@ -49,22 +46,6 @@ def build_env(env_fn: EnvFactory | str, env_kwargs: dict[str, Any] | None = None
 
         return gym.make(env_fn, **(env_kwargs or {}))
     return env_fn()
-
-
-@dataclass
-class StepFailure:
-    """A step that raised inside a worker, returned as a value (see ``EnvGroup.step_seq``)."""
-
-    error: Exception
-    text: str
-
-
-@dataclass
-class Restart:
-    """An env rebuilt inside its worker after its step or reset raised."""
-
-    env_index: int
-    error: str
 
 
 class EnvGroup:
@@ -95,9 +76,6 @@ class EnvGroup:
         self.autoreset = np.zeros(n, dtype=np.bool_)
         self.last_obs: list[Any] = [None] * n
         self._lock = threading.RLock()  # see locked(): a socket thread may serve steps
-        self._seq_lock = threading.Lock()  # step_seq: a compiled graph and a retry may race
-        self._seq: int | None = None
-        self._seq_answer: Any = None
 
     # -- introspection -----------------------------------------------------------------
     def spaces(self) -> tuple[gym.Space, gym.Space, dict[str, Any], str | None]:
@@ -119,21 +97,6 @@ class EnvGroup:
         return os.getpid()
 
     def ready(self) -> bool:
-        return True
-
-    def open_socket(self, path: str, driver_node: str, spin_us: float) -> bool:
-        """On ``driver_node``: serve steps at Unix socket ``path`` (else False), spinning
-        ``spin_us`` before each blocking read.
-
-        See :mod:`chronogym.vector.socket_backend` (``transport="socket"``).
-        """
-        import ray
-
-        if ray.get_runtime_context().get_node_id() != driver_node:
-            return False
-        from chronogym.vector.socket_backend import serve_socket
-
-        serve_socket(self, path, spin_us)
         return True
 
     # -- restarts ----------------------------------------------------------------------
@@ -164,6 +127,7 @@ class EnvGroup:
 
     # -- reset / step ------------------------------------------------------------------
     def _batch(self, items: list[Any]) -> Any:
+        """Observations of every env here as one batch (as ``SyncVectorEnv`` joins them)."""
         out = create_empty_array(self.single_observation_space, n=len(items), fn=np.zeros)
         return concatenate(self.single_observation_space, items, out)
 
@@ -183,7 +147,7 @@ class EnvGroup:
         options: dict[str, Any] | None,
         mask: Sequence[bool] | None = None,
     ) -> tuple[Any, list[dict[str, Any]], list[Restart]]:
-        """Reset the envs (those where ``mask`` is True); return batch obs, infos, restarts."""
+        """Reset the envs (those where ``mask`` is True); return per-env obs, infos, restarts."""
         infos: list[dict[str, Any]] = [{} for _ in self.envs]
         restarts: list[Restart] = []
         for j in range(len(self.envs)):
@@ -198,13 +162,17 @@ class EnvGroup:
                 obs, info = self._reset_one(j, seeds[j], options)
             self.last_obs[j] = obs
             infos[j] = info
-        return self._batch(self.last_obs), infos, restarts
+        return list(self.last_obs), infos, restarts
 
     @locked
     def step(
-        self, actions: Any
-    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]], list[Restart]]:
-        """Step every env with its row of ``actions``, autoresetting as Gymnasium does."""
+        self, actions: Sequence[Any]
+    ) -> tuple[list[Any], np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]], list[Restart]]:
+        """Step every env with its action (one per env), autoresetting as Gymnasium does.
+
+        Returns per-env observations, then rewards, terminations, truncations,
+        per-env infos and the restarts.
+        """
         n = len(self.envs)
         rewards = np.zeros(n, dtype=np.float64)
         terminations = np.zeros(n, dtype=np.bool_)
@@ -212,8 +180,9 @@ class EnvGroup:
         infos: list[dict[str, Any]] = [{} for _ in range(n)]
         restarts: list[Restart] = []
         mode = self.autoreset_mode
-        for j, env in enumerate(self.envs):
-            action = _row(actions, j)
+        if len(actions) != n:
+            raise ValueError(f"{len(actions)} actions for the {n} envs of this worker")
+        for j, (env, action) in enumerate(zip(self.envs, actions, strict=True)):
             try:
                 if mode == AutoresetMode.NEXT_STEP and self.autoreset[j]:
                     obs, info = self._reset_one(j, None, None)
@@ -236,7 +205,7 @@ class EnvGroup:
             self.last_obs[j] = obs
             infos[j] = info
         self.autoreset = np.logical_or(terminations, truncations)
-        return self._batch(self.last_obs), rewards, terminations, truncations, infos, restarts
+        return list(self.last_obs), rewards, terminations, truncations, infos, restarts
 
     @locked
     def step_packed(self, action_bytes: bytes | memoryview, timed: bool = False) -> tuple:
@@ -257,7 +226,7 @@ class EnvGroup:
         obs, rewards, terminations, truncations, infos, restarts = self.step(actions)
         computed = time.perf_counter()
         out = (
-            obs.tobytes(),
+            self._batch(obs).tobytes(),
             rewards.tobytes(),
             terminations.tobytes(),
             truncations.tobytes(),
@@ -268,28 +237,6 @@ class EnvGroup:
             return out
         serde = stepped - start + time.perf_counter() - computed
         return (*out, (serde, computed - stepped))
-
-    def step_seq(self, call: tuple[Any, ...]) -> Any:
-        """``step_packed(*call[1:])`` once per sequence number ``call[0]``.
-
-        A repeated number returns the answer already computed (or waits for it):
-        after a compiled-graph read was lost, the driver asks again by plain
-        actor call without stepping twice. Errors come back as a StepFailure.
-        Infos come pickled: arrays read from a compiled graph's channel would be
-        views on its buffer and block its next write while the driver holds them.
-        """
-        seq, *args = call
-        with self._seq_lock:
-            if seq != self._seq:
-                self._seq = seq
-                try:
-                    answer = self.step_packed(*args)
-                    if answer[4] is not None:
-                        answer = (*answer[:4], pickle.dumps(answer[4]), *answer[5:])
-                    self._seq_answer = answer
-                except Exception as error:
-                    self._seq_answer = StepFailure(error, traceback.format_exc())
-            return self._seq_answer
 
     def _restart_in_step(self, j: int) -> tuple[Any, dict[str, Any]]:
         final_obs = self.last_obs[j]
@@ -320,20 +267,8 @@ class EnvGroup:
             env.close()
 
 
-class DisabledAutoresetError(RuntimeError):
-    """Stepping an env that ended while autoreset is DISABLED."""
-
-
 def raise_disabled(env_index: int) -> None:
     raise DisabledAutoresetError(
         f"env {env_index} ended and autoreset_mode is DISABLED; reset it with "
         "reset(options={'reset_mask': mask}) before stepping it again"
     )
-
-
-def _row(actions: Any, j: int) -> Any:
-    if isinstance(actions, dict):
-        return {key: _row(value, j) for key, value in actions.items()}
-    if isinstance(actions, tuple):
-        return tuple(_row(value, j) for value in actions)
-    return actions[j]

@@ -1,4 +1,4 @@
-"""Asynchronous stepping helpers: calls in flight, env-id checks, errors, subset infos.
+"""Asynchronous stepping helpers: calls in flight, env-id checks, errors.
 
 :class:`~chronogym.vector.driver.WorkerVectorEnv` uses these for ``send`` /
 ``recv`` (EnvPool-style partial batches) and ``step_async`` / ``step_wait``
@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 from gymnasium.error import AlreadyPendingCallError
-from gymnasium.vector import VectorEnv
 
 from chronogym.errors import ChronogymError
 
@@ -94,25 +93,6 @@ def workers_of(
                 "it touches"
             )
     return workers
-
-
-class _InfoBatch:
-    """Gymnasium's vector-info layout (``VectorEnv._add_info``) for ``num_envs`` rows."""
-
-    _add_info = VectorEnv._add_info
-
-    def __init__(self, num_envs: int) -> None:
-        self.num_envs = num_envs
-
-
-def batch_infos(infos_per_env: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Per-env info dicts as one vector info (arrays plus ``_key`` masks), Gymnasium-style."""
-    batch = _InfoBatch(len(infos_per_env))
-    infos: dict[str, Any] = {}
-    for i, info in enumerate(infos_per_env):
-        if info:
-            infos = batch._add_info(infos, info, i)
-    return infos
 
 
 def _show(env_ids: Any) -> str:

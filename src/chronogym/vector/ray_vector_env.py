@@ -9,21 +9,21 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
-from chronogym.vector.compiled_backend import CompiledRayBackend
-from chronogym.vector.driver import WorkerVectorEnv, normalize_env_fns
-from chronogym.vector.group import EnvFactory
-from chronogym.vector.ray_backend import (
-    RayBackend,
+from chronogym.ray_runtime import (
     actor_scheduling,
     check_worker_gpus,
     cluster_cpus,
     ensure_ray,
     resolve_worker_cpus,
 )
-from chronogym.vector.socket_backend import SocketRayBackend, check_spin_us
+from chronogym.vector.actor_transport import ActorBackend
+from chronogym.vector.checks import normalize_env_fns
+from chronogym.vector.driver import WorkerVectorEnv
+from chronogym.vector.socket_transport import SocketBackend, check_spin_us
+from chronogym.vector.wire import EnvFactory
 
-TRANSPORTS = ("actor", "compiled", "socket")
-BACKENDS = {"actor": RayBackend, "compiled": CompiledRayBackend, "socket": SocketRayBackend}
+TRANSPORTS = ("socket", "actor")
+BACKENDS = {"socket": SocketBackend, "actor": ActorBackend}
 
 
 def default_transport() -> str:
@@ -37,8 +37,9 @@ def check_transport(transport: str | None) -> str:
         return default_transport()
     if transport not in TRANSPORTS:
         raise ValueError(
-            f"transport={transport!r}: expected one of {TRANSPORTS[:2]} (Ray calls), 'socket' "
-            f"(Unix sockets) or None (the default, {default_transport()!r})"
+            f"transport={transport!r}: expected one of {TRANSPORTS} ('socket': Unix sockets "
+            "to workers on this node; 'actor': Ray actor calls) or None (the default, "
+            f"{default_transport()!r})"
         )
     return transport
 
@@ -74,11 +75,10 @@ class RayVectorEnv(WorkerVectorEnv):
             temporary directory and each step's bytes (``step``, ``send`` /
             ``recv``) go over it, several times cheaper than a Ray call;
             workers on other nodes use plain calls. ``"actor"``: one plain Ray
-            actor call per worker. ``"compiled"``: one Ray Compiled Graph over
-            every worker (shared-memory channels; its actors poll, using CPU
-            while idle). See ``benchmarks/README.md``. Box spaces only; other
-            calls (reset, ``call``, ...) always use plain actor calls, and
-            faults are handled the same way with every transport.
+            actor call per worker. See ``benchmarks/README.md``. Box spaces
+            only; other calls (reset, ``call``, other spaces) always use plain
+            actor calls, and faults are handled the same way with both
+            transports.
         spin_us: ``transport="socket"`` only: µs each end of a socket spins
             (polling, yielding its core to other processes) before it blocks
             on a read; an answer caught while spinning saves the wake-up of

@@ -9,12 +9,15 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
-from chronogym.vector.driver import Outcome, WorkerVectorEnv
-from chronogym.vector.group import DisabledAutoresetError, EnvFactory, EnvGroup
+from chronogym.vector.driver import WorkerVectorEnv
+from chronogym.vector.group import EnvGroup
+from chronogym.vector.wire import EnvFactory, Outcome, error_outcome
 
 
 class LocalBackend:
     """EnvGroups held in this process; a call runs when it is submitted."""
+
+    step_timeout = None  # a call here cannot hang apart from the driver
 
     def __init__(self) -> None:
         self.groups: list[EnvGroup] = []
@@ -30,10 +33,8 @@ class LocalBackend:
     def submit(self, worker: int, method: str, *args: Any) -> Outcome:
         try:
             return Outcome(True, getattr(self.groups[worker], method)(*args))
-        except DisabledAutoresetError as error:
-            return Outcome(False, error, str(error))
         except Exception as error:
-            return Outcome(False, error, traceback.format_exc())
+            return error_outcome(error, traceback.format_exc())
 
     def gather(self, workers: list[int], handles: list[Outcome]) -> list[Outcome]:
         return handles

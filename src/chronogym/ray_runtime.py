@@ -1,20 +1,16 @@
-"""Ray plumbing: connecting to (or starting) a cluster and hosting EnvGroups in actors."""
+"""Ray plumbing shared by the vector envs and the parallel studies: connecting to (or
+starting) a cluster, sizing actors, and starting actors that may die before they are ready."""
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import os
 import socket
 import time
-import traceback
 import warnings
 from collections.abc import Callable
 from typing import Any
-
-from chronogym.vector.driver import Outcome
-from chronogym.vector.group import DisabledAutoresetError, EnvGroup
 
 logger = logging.getLogger("chronogym")
 
@@ -163,105 +159,3 @@ def actor_scheduling(scheduling: str) -> dict[str, str]:
     if scheduling not in SCHEDULING:
         raise ValueError(f"scheduling={scheduling!r}: expected one of {SCHEDULING}")
     return {} if scheduling == "default" else {"scheduling_strategy": "SPREAD"}
-
-
-class RayBackend:
-    """One Ray actor per worker, each owning an EnvGroup for its whole life."""
-
-    def __init__(
-        self,
-        num_cpus: float,
-        num_gpus: float,
-        start_timeout: float,
-        step_timeout: float | None,
-        scheduling: str = "default",
-    ) -> None:
-        import ray
-
-        self._ray = ray
-        self._actor_cls = ray.remote(EnvGroup).options(
-            num_cpus=num_cpus,
-            num_gpus=num_gpus,
-            max_restarts=0,
-            max_task_retries=0,
-            **actor_scheduling(scheduling),
-        )
-        self.start_timeout = start_timeout
-        self.step_timeout = step_timeout
-        self.actors: list[Any] = []
-        self._pids: list[int | None] = []
-
-    def _wait_ready(self, actors: list[Any]) -> None:
-        ray = self._ray
-        refs = [actor.ready.remote() for actor in actors]
-        try:
-            ray.get(refs, timeout=self.start_timeout)
-        except ray.exceptions.GetTimeoutError:
-            for actor in actors:
-                ray.kill(actor)
-            raise TimeoutError(
-                f"Ray workers did not start within {self.start_timeout} s; the cluster may lack "
-                "the CPUs/GPUs they request (see `ray status`)"
-            ) from None
-        except ray.exceptions.RayActorError as error:
-            for actor in actors:
-                ray.kill(actor)
-            raise RuntimeError(f"a Ray worker failed while building its envs:\n{error}") from None
-
-    def start(self, group_kwargs: list[dict[str, Any]]) -> None:
-        actors = [self._actor_cls.remote(**kwargs) for kwargs in group_kwargs]
-        self._wait_ready(actors)
-        self.actors = actors
-        self._pids = [None] * len(actors)
-
-    def replace(self, worker: int, kwargs: dict[str, Any]) -> None:
-        with contextlib.suppress(Exception):  # already dead
-            self._ray.kill(self.actors[worker], no_restart=True)
-        actor = start_with_retries(
-            lambda: self._actor_cls.remote(**kwargs), lambda new: self._wait_ready([new])
-        )
-        self.actors[worker] = actor
-        self._pids[worker] = None
-
-    def submit(self, worker: int, method: str, *args: Any) -> Any:
-        return getattr(self.actors[worker], method).remote(*args)
-
-    def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]:
-        ray = self._ray
-        try:
-            return [Outcome(True, value) for value in ray.get(handles, timeout=self.step_timeout)]
-        except Exception:
-            pass
-        outcomes = []
-        for handle in handles:
-            try:
-                outcomes.append(Outcome(True, ray.get(handle, timeout=self.step_timeout)))
-            except DisabledAutoresetError as error:
-                outcomes.append(Outcome(False, error, str(error)))
-            except ray.exceptions.RayTaskError as error:
-                outcomes.append(Outcome(False, error.as_instanceof_cause(), str(error)))
-            except ray.exceptions.GetTimeoutError:
-                message = f"no answer within step_timeout={self.step_timeout} s"
-                outcomes.append(Outcome(False, None, message, lost=True))
-            except ray.exceptions.RayError as error:
-                outcomes.append(Outcome(False, error, f"{type(error).__name__}: {error}", True))
-            except Exception as error:
-                outcomes.append(Outcome(False, error, traceback.format_exc(), lost=True))
-        return outcomes
-
-    def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]:
-        """Indices of ``handles`` that have answered (``ray.wait``; a dead worker counts)."""
-        ready, _ = self._ray.wait(handles, num_returns=num_returns, timeout=timeout)
-        done = set(ready)
-        return [k for k, handle in enumerate(handles) if handle in done]
-
-    def pid(self, worker: int) -> int:
-        if self._pids[worker] is None:
-            self._pids[worker] = self._ray.get(self.actors[worker].pid.remote())
-        return self._pids[worker]  # type: ignore[return-value]
-
-    def shutdown(self) -> None:
-        for actor in self.actors:
-            with contextlib.suppress(Exception):
-                self._ray.kill(actor, no_restart=True)
-        self.actors = []

@@ -1,8 +1,9 @@
 """The ``transport="socket"`` backend: the barrier step over Unix domain sockets.
 
-Workers are the same Ray actors as with the plain transport, created and
-replaced by Ray. Once a worker is ready and runs on the driver's node, it
-serves a Unix socket in a private directory (``mkdtemp``, mode 0700: only
+Workers are Ray actors as with the actor transport, created and replaced the
+same way; each holds a :class:`SocketWorker` (an EnvGroup that can serve a
+socket). Once a worker is ready and runs on the driver's node, it serves a
+Unix socket in a private directory (``mkdtemp``, mode 0700: only
 this user can connect; nothing on the network) from a daemon thread. Every
 step of Box spaces -- the barrier ``step`` and ``send`` / ``recv`` -- then
 writes one message per worker (its action bytes) and reads the answer from
@@ -20,10 +21,7 @@ spinning, while dear steps and a driver that thinks between steps (a policy's
 forward pass) leave the cores to the workers. ``spin_us=0`` gives plain
 blocking reads (no CPU at all while waiting).
 
-Messages: request = ``<I B`` (action byte count, timed flag) + action bytes;
-answer = ``<B 5I`` (status, then the lengths of obs, rewards, terminations,
-truncations and tail) + those parts back to back. Tail: pickled (infos,
-restarts[, timings]) when any is set, or a pickled StepFailure (status 1).
+Messages: the packed-step format of :mod:`chronogym.vector.wire`.
 
 Faults: EOF, a reset connection or ``step_timeout`` without an answer mark the
 worker lost; the driver replaces it as with the plain transport and the
@@ -36,11 +34,9 @@ import contextlib
 import logging
 import math
 import os
-import pickle
 import select
 import shutil
 import socket
-import struct
 import tempfile
 import threading
 import time
@@ -48,15 +44,19 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
-from chronogym.vector.compiled_backend import failure_outcome
-from chronogym.vector.driver import Outcome
-from chronogym.vector.group import EnvGroup, StepFailure
-from chronogym.vector.ray_backend import RayBackend
+from chronogym.vector.actor_transport import ActorBackend
+from chronogym.vector.group import EnvGroup
+from chronogym.vector.wire import (
+    ANSWER,
+    REQUEST,
+    Outcome,
+    StepFailure,
+    decode_answer,
+    encode_answer,
+    fill,
+)
 
 STEP_METHOD = "step_packed"  # the driver's step method this backend sends over sockets
-REQUEST = struct.Struct("<IB")  # action byte count, timed flag
-ANSWER = struct.Struct("<BIIIII")  # status (0 ok, 1 failure), then 5 part lengths
-OK, FAILED = 0, 1
 ACCEPT_TIMEOUT_S = 30.0  # a worker stops listening if the driver never connects
 DEATH_PROBE_S = 10.0  # how long to ask Ray why a worker whose socket broke died
 #: Default cap on the spin before a blocking read, µs (see the module docstring);
@@ -124,29 +124,18 @@ def _poller(sock: socket.socket) -> select.poll:
 
 
 # -- worker side ------------------------------------------------------------------------------
-def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
-    """Read into ``view`` from ``got`` until at least ``need`` bytes are in; the count.
-    EOFError when the peer closes first (both sides use it)."""
-    while got < need:
-        n = sock.recv_into(view[got:])
-        if n == 0:
-            raise EOFError(f"the peer closed its socket after {got} of {need} bytes")
-        got += n
-    return got
+class SocketWorker(EnvGroup):
+    """An EnvGroup that can also serve its packed steps over a Unix socket."""
 
+    def open_socket(self, path: str, driver_node: str, spin_us: float) -> bool:
+        """On ``driver_node``: serve steps at Unix socket ``path`` (else False), spinning
+        ``spin_us`` before each blocking read."""
+        import ray
 
-def encode_answer(answer: Any) -> bytes:
-    """One answer of ``step_packed`` (or a StepFailure) as the bytes of an answer message."""
-    if isinstance(answer, StepFailure):
-        try:
-            tail = pickle.dumps(answer)
-        except Exception:  # an exception that cannot be pickled travels as its text
-            tail = pickle.dumps(StepFailure(RuntimeError(answer.text), answer.text))
-        return ANSWER.pack(FAILED, 0, 0, 0, 0, len(tail)) + tail
-    extra = answer[4:]
-    tail = pickle.dumps(extra) if any(x is not None for x in extra) else b""
-    parts = (*answer[:4], tail)
-    return ANSWER.pack(OK, *(len(p) for p in parts)) + b"".join(parts)
+        if ray.get_runtime_context().get_node_id() != driver_node:
+            return False
+        serve_socket(self, path, spin_us)
+        return True
 
 
 def serve_socket(group: EnvGroup, path: str, spin_us: float = DEFAULT_SPIN_US) -> None:
@@ -211,8 +200,10 @@ class SockHandle:
     outcome: Outcome | None = None
 
 
-class SocketRayBackend(RayBackend):
-    """RayBackend whose steps go over Unix sockets to workers on this node."""
+class SocketBackend(ActorBackend):
+    """ActorBackend whose steps go over Unix sockets to workers on this node."""
+
+    worker_cls = SocketWorker
 
     def __init__(self, *args: Any, spin_us: float | None = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -425,15 +416,3 @@ class SocketRayBackend(RayBackend):
         ready = poller.poll(None if timeout is None else math.ceil(timeout * 1000))
         if spinner is not None and ready:
             spinner.arrived()
-
-
-def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
-    """An answer message as the Outcome the plain transport gives for the same answer."""
-    parts, at = [], ANSWER.size
-    for size in sizes:
-        parts.append(view[at : at + size])
-        at += size
-    if status == FAILED:
-        return failure_outcome(pickle.loads(parts[4]))  # trusted: own worker
-    extra = pickle.loads(parts[4]) if sizes[4] else (None, None)  # trusted: own worker
-    return Outcome(True, (*(bytes(p) for p in parts[:4]), *extra))
