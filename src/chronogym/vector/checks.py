@@ -52,21 +52,30 @@ def check_envs_per_worker(envs_per_worker: int, num_envs: int) -> int:
     return int(envs_per_worker)
 
 
-
 def check_reset_mask(reset_mask: Any, num_envs: int) -> np.ndarray:
+    """``options["reset_mask"]``: a bool array of shape (num_envs,) with a True value.
+
+    The exception types are Gymnasium's (TypeError for type and dtype, ValueError
+    for shape and an all-False mask).
+    """
+    expected = f"expected a numpy bool array of shape ({num_envs},) with at least one True"
+    shown = _show(reset_mask)
     if not isinstance(reset_mask, np.ndarray):
-        raise TypeError(f"options['reset_mask'] must be a numpy array, got {type(reset_mask)}")
-    if reset_mask.shape != (num_envs,):
-        raise ValueError(
-            f"options['reset_mask'] has shape {reset_mask.shape}; expected ({num_envs},)"
+        raise TypeError(
+            f"options['reset_mask']={shown} is a {type(reset_mask).__name__}; {expected}"
         )
+    if reset_mask.shape != (num_envs,):
+        raise ValueError(f"options['reset_mask']={shown} has shape {reset_mask.shape}; {expected}")
     if reset_mask.dtype != np.bool_:
-        raise TypeError(f"options['reset_mask'] has dtype {reset_mask.dtype}; expected bool")
+        raise TypeError(f"options['reset_mask']={shown} has dtype {reset_mask.dtype}; {expected}")
     if not reset_mask.any():
-        raise ValueError("options['reset_mask'] must contain at least one True value")
+        raise ValueError(f"options['reset_mask']={shown} is all False; {expected}")
     return reset_mask
 
 
+def _show(value: Any) -> str:
+    text = repr(value.tolist() if isinstance(value, np.ndarray) else value)
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def check_max_restarts(max_restarts: int) -> int:
