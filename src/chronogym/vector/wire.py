@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import gymnasium as gym
+import numpy as np
 
 EnvFactory = Callable[[], gym.Env]
 
@@ -41,6 +42,17 @@ class Outcome:
     value: Any = None
     error: str = ""
     lost: bool = False  # the worker process is gone or stopped answering
+
+
+@dataclass
+class StepPart:
+    """One worker's share of a step (or of an asynchronous reset)."""
+
+    obs: Any
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    infos: list[dict[str, Any]]
 
 
 @dataclass
