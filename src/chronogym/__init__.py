@@ -63,13 +63,29 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_EXPORTS))
 
 
+def _can_load(library: str) -> bool:
+    import ctypes
+
+    try:
+        ctypes.CDLL(library)
+    except OSError:
+        return False
+    return True
+
+
 def _setup() -> None:
     import os
+    import sys
 
     # MuJoCo picks its GL backend when it is first imported; without a display,
-    # GLFW cannot render, so default to headless EGL (the user's choice wins).
-    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
-        os.environ["MUJOCO_GL"] = "egl"
+    # GLFW cannot render, so default to headless EGL (the user's choice wins). Without
+    # libEGL, MUJOCO_GL=egl would make ``import mujoco`` itself fail: turn rendering off.
+    if (
+        "MUJOCO_GL" not in os.environ
+        and not os.environ.get("DISPLAY")
+        and sys.platform.startswith("linux")
+    ):
+        os.environ["MUJOCO_GL"] = "egl" if _can_load("libEGL.so.1") else "disable"
     from chronogym.registration import register_envs
 
     register_envs()

@@ -35,6 +35,33 @@ def _zero_non_finite(value: Any) -> Any:
     return value
 
 
+def _usable_render_modes(task: Task, render_mode: Any) -> list[str]:
+    """The task's render modes if this process can render them, else ``[]``.
+
+    Raise ValueError when ``render_mode`` is not None and not one of them.
+    """
+    declared = list(task.render_modes)
+    reason = task.render_unavailable() if declared else None
+    usable = [] if reason else declared
+    if render_mode is None or render_mode in usable:
+        return usable
+    name = type(task).__name__
+    if reason:
+        why = f"{name} cannot render in this process: {reason}"
+    elif not declared:
+        why = (
+            f"{name} does not render (its render_modes is empty; a Task renders when it "
+            "declares render_modes = ('rgb_array',) and implements render(), a FunctionTask "
+            "when given render=)"
+        )
+    else:
+        why = f"{name} renders {declared} only"
+        if render_mode == "human":
+            why += " (for a window, wrap it in gymnasium.wrappers.HumanRendering)"
+    expected = " or ".join(repr(m) for m in [None, *usable])
+    raise ValueError(f"render_mode={render_mode!r}: {why}; expected {expected}")
+
+
 class SimEnv(gym.Env):
     """One simulation as a Gymnasium environment.
 
@@ -45,6 +72,9 @@ class SimEnv(gym.Env):
     to ``task.max_episode_steps``). A NaN/Inf observation or
     reward, or ``task.diverged()``, ends the episode with ``terminated=True``
     and ``info["diverged"] = True``; non-finite values are then replaced by 0.
+    ``metadata["render_modes"]`` lists ``"rgb_array"`` only when the task
+    renders and this process can (e.g. MuJoCo found an OpenGL backend);
+    another ``render_mode`` than None or those is refused before ``task.init()``.
     """
 
     def __init__(
@@ -65,6 +95,7 @@ class SimEnv(gym.Env):
             raise ValueError(
                 f"max_episode_steps={max_episode_steps!r}: expected None or an integer >= 1"
             )
+        render_modes = _usable_render_modes(task, render_mode)  # before init(): fail early
         self.task = task
         self.invalid_action = invalid_action
         task.init()
@@ -79,9 +110,8 @@ class SimEnv(gym.Env):
         )
         task.max_episode_steps = self.max_episode_steps  # the task sees the horizon it runs under
         fps = task.render_fps or 1.0 / (self.dt * self.k)
-        self.metadata = {"render_modes": ["rgb_array"], "render_fps": fps}
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode={render_mode!r}: expected None or 'rgb_array'")
+        # A new dict per instance (gym.Env.metadata is a shared class attribute).
+        self.metadata = {"render_modes": render_modes, "render_fps": fps}
         self.render_mode = render_mode
         self.sim_time = 0.0
         self.elapsed_steps = 0

@@ -29,6 +29,8 @@ import numpy as np
 from chronogym.errors import TaskDefinitionError
 
 REQUIRED_METHODS = ("init", "reset", "apply_action", "observe", "reward", "terminated")
+# What ``SimEnv.render()`` can return: ``task.render()`` takes no mode, so one mode at most.
+RENDER_MODES = ("rgb_array",)
 
 
 class Task:
@@ -38,7 +40,8 @@ class Task:
     env step), and in ``init`` build ``self.advanceables`` plus
     ``self.observation_space`` / ``self.action_space`` (class attributes work
     too). Optional: ``max_episode_steps``, ``truncated``, ``info``,
-    ``diverged``, ``render``, ``close``.
+    ``diverged``, ``render``, ``close``. A task that renders declares it with
+    ``render_modes = ("rgb_array",)`` and implements ``render()``.
     """
 
     dt: float
@@ -48,6 +51,8 @@ class Task:
     action_space: Any = None
     advanceables: Sequence[Any] = ()
     render_fps: float | None = None
+    render_modes: tuple[str, ...] = ()
+    """Render modes this task supports: ``()`` (none) or ``("rgb_array",)``."""
 
     def init(self) -> None:
         """Build advanceables and resources once; heavy work belongs here."""
@@ -89,6 +94,13 @@ class Task:
         """Return an RGB frame (H, W, 3) uint8, or raise NotImplementedError."""
         raise NotImplementedError(f"{type(self).__name__} does not implement render()")
 
+    def render_unavailable(self) -> str | None:
+        """Why this process cannot render the declared modes (e.g. no OpenGL), or None.
+
+        Called once by ``SimEnv`` before ``init()``; keep it cheap.
+        """
+        return None
+
     def close(self) -> None:
         """Release resources (renderers, files)."""
 
@@ -117,6 +129,7 @@ def check_task_definition(task: Task) -> None:
     k = getattr(task, "k", None)
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise ValueError(f"Task {type(task).__name__}: k={k!r}, expected an integer >= 1")
+    check_render_modes(task)
     steps = task.max_episode_steps
     if steps is not None and (
         isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1
@@ -124,6 +137,21 @@ def check_task_definition(task: Task) -> None:
         raise ValueError(
             f"Task {type(task).__name__}: max_episode_steps={steps!r}, "
             "expected None or an integer >= 1"
+        )
+
+
+def check_render_modes(task: Task) -> None:
+    """Raise TaskDefinitionError unless ``render_modes`` is ``()`` or ``("rgb_array",)``
+    and a task declaring a mode implements ``render()``."""
+    name = type(task).__name__
+    modes = task.render_modes
+    if not isinstance(modes, (tuple, list)) or any(m not in RENDER_MODES for m in modes):
+        raise TaskDefinitionError(
+            f"Task {name}: render_modes={modes!r}, expected () or {RENDER_MODES!r}"
+        )
+    if modes and not is_overridden(task, "render"):
+        raise TaskDefinitionError(
+            f"Task {name} declares render_modes={modes!r} but does not implement render()"
         )
 
 
@@ -147,6 +175,7 @@ class FunctionTask(Task):
     receives ``resources`` first, e.g. ``observe(resources) -> obs``,
     ``reward(resources, action, obs) -> float``. ``observation_space`` and
     ``action_space`` are given directly or as ``fn(resources) -> Space``.
+    It renders (``render_modes == ("rgb_array",)``) iff ``render`` is given.
     """
 
     def __init__(
@@ -193,6 +222,7 @@ class FunctionTask(Task):
                     f"FunctionTask: {name}={fn!r}, expected a callable or None"
                 )
         self._fns = {**pieces, **{n: f for n, f in optional.items() if f is not None}}
+        self.render_modes = RENDER_MODES if render is not None else ()
         self._space_sources = (observation_space, action_space)
         self.dt = dt
         self.k = k

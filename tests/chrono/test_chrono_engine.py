@@ -107,9 +107,13 @@ def test_divergence_and_motor_input(chrono):
 
 
 def test_registered_env_passes_gymnasium_checker(chrono):
+    """With the render check on: the Chrono cart-pole declares no render mode, honestly."""
     env = gym.make(ENV_ID)
-    check_env(env.unwrapped, skip_render_check=True)
+    assert env.unwrapped.metadata["render_modes"] == []
+    check_env(env.unwrapped)
     env.close()
+    with pytest.raises(ValueError, match=r"render_mode='rgb_array': ChronoCartPoleTask does not"):
+        gym.make(ENV_ID, render_mode="rgb_array")
 
 
 def episode(env: SimEnv, seed: int, steps: int = 200) -> list[np.ndarray]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from typing import Any
 
 import numpy as np
@@ -17,17 +18,59 @@ def check_headless_gl() -> None:
     first (it defaults ``MUJOCO_GL`` to ``egl`` when there is no display), or set
     ``MUJOCO_GL=egl`` / ``osmesa`` yourself.
     """
-    from mujoco.rendering.classic import gl_context
-
-    backend = getattr(gl_context, "_MUJOCO_GL", "")
-    if backend in ("", "glfw", "enable", "enabled", "on", "true", "1") and not os.environ.get(
-        "DISPLAY"
+    backend = getattr(_gl_context(), "_MUJOCO_GL", "")
+    if (
+        sys.platform.startswith("linux")
+        and backend in ("", "glfw", "enable", "enabled", "on", "true", "1")
+        and not os.environ.get("DISPLAY")
     ):
         raise RuntimeError(
             f"MuJoCo uses the GLFW backend (MUJOCO_GL={backend!r}) but there is no display; "
             "expected MUJOCO_GL=egl or osmesa set before mujoco is first imported "
             "(importing chronogym before mujoco does this)"
         )
+
+
+GL_HINT = (
+    "install EGL (apt-get install libegl1 libgl1-mesa-dri) or OSMesa (apt-get install "
+    "libosmesa6, then MUJOCO_GL=osmesa); see README 'Rendering'"
+)
+
+
+def _gl_context() -> Any:
+    """MuJoCo's ``gl_context`` module, where it records the backend chosen at import."""
+    import mujoco  # noqa: F401  (importing it picks the backend)
+
+    try:
+        from mujoco.rendering.classic import gl_context
+    except ImportError:  # older MuJoCo kept it at the top level
+        from mujoco import gl_context
+    return gl_context
+
+
+def gl_unavailable() -> str | None:
+    """Why MuJoCo cannot render offscreen in this process, or None when it has a GL backend.
+
+    Cheap: it reads the backend MuJoCo chose at import and whether its library loaded,
+    without creating a GL context (a backend that loads but finds no device fails at the
+    first ``render()`` instead).
+    """
+    gl_context = _gl_context()
+    backend = getattr(gl_context, "_MUJOCO_GL", "")
+    if backend in ("disable", "disabled", "off", "false", "0"):
+        return (
+            f"MUJOCO_GL={backend!r} turns MuJoCo's rendering off (chronogym sets it when "
+            f"there is no display and libEGL cannot be loaded); {GL_HINT}"
+        )
+    context = getattr(gl_context, "GLContext", None)
+    if context is None or context.__name__ == "_MissingGLContext":
+        error = getattr(gl_context, "_import_error", None)
+        return f"MuJoCo could not load its GL backend (MUJOCO_GL={backend!r}: {error}); {GL_HINT}"
+    try:
+        check_headless_gl()
+    except RuntimeError as error:
+        return str(error)
+    return None
 
 
 # mjtWarning indices of mjWARN_BADQPOS, mjWARN_BADQVEL and mjWARN_BADQACC (stable in the C API).
@@ -54,10 +97,12 @@ class MujocoTask(Task):
     ``reward`` and ``terminated``. When the subclass sets ``dt``, it becomes
     ``model.opt.timestep``; otherwise ``dt`` is taken from the model.
     Divergence detection and offscreen ``rgb_array`` rendering come for free
-    (rendering needs an OpenGL backend: ``MUJOCO_GL=egl`` or ``osmesa``).
+    (rendering needs an OpenGL backend: ``MUJOCO_GL=egl`` or ``osmesa``; without
+    one, ``SimEnv`` lists no render mode). Set ``render_modes = ()`` to opt out.
     """
 
     dt: float | None = None  # type: ignore[assignment]
+    render_modes: tuple[str, ...] = ("rgb_array",)
     render_width: int = 480
     render_height: int = 360
     render_camera: str | int = -1
@@ -103,6 +148,9 @@ class MujocoTask(Task):
 
     def diverged(self) -> bool:
         return mujoco_diverged(self.data)
+
+    def render_unavailable(self) -> str | None:
+        return gl_unavailable()
 
     def render(self) -> np.ndarray:
         if self._renderer is None:
