@@ -20,10 +20,7 @@ from __future__ import annotations
 
 import argparse
 import csv
-import datetime
-import json
 import os
-import platform
 import statistics
 import sys
 import warnings
@@ -31,8 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
 
-DEFAULT_OUT = Path(__file__).parent / "results"
+DEFAULT_OUT = RESULTS
 
 
 @dataclass
@@ -146,11 +144,7 @@ def step_curve(run: Run, grid: np.ndarray) -> np.ndarray:
 
 def plot(runs: list[Run], terrain: str, levels: list[int], target: float, path: Path) -> None:
     """Two panels: best J vs wall-clock (median, min-max band) and vs trial index."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     warnings.filterwarnings("ignore", "All-NaN slice", RuntimeWarning)
 
     fig, (ax_t, ax_n) = plt.subplots(1, 2, figsize=(12, 4.5))
@@ -189,9 +183,7 @@ def plot(runs: list[Run], terrain: str, levels: list[int], target: float, path: 
         f"Lander design optimization, {terrain} terrain: TPE on W parallel Ray workers "
         f"({os.cpu_count()} CPUs)"
     )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def write_csv(runs: list[Run], path: Path) -> None:
@@ -216,19 +208,24 @@ def write_csv(runs: list[Run], path: Path) -> None:
                 )
 
 
+TABLE_COLUMNS = (
+    Column("W", 3, key="W"),
+    Column("wall s", 8, "{:.1f}", key="wall_s"),
+    Column("start s", 8, "{:.1f}", key="startup_s"),
+    Column("best J", 8, "{:.4f}", key="best_J"),
+    Column("t->target s", 12, "{:.2f}", key="time_to_target_s"),
+    Column("trials->tgt", 12, "{:.0f}", key="trials_to_target"),
+    Column("speed-up", 9, "{:.2f}x", key="speedup_vs_first"),
+)
+
+
 def format_table(terrain: str, summary: dict) -> str:
+    rows = [{"W": w, **row} for w, row in summary["levels"].items()]
     lines = [
         f"\n{terrain} terrain: target J = {summary['target_J']:.4f} "
         "(the worst final best over all constant-liar runs)",
-        f"{'W':>3} {'wall s':>8} {'start s':>8} {'best J':>8} {'t->target s':>12} "
-        f"{'trials->tgt':>12} {'speed-up':>9}",
+        table(TABLE_COLUMNS, rows, sep=" "),
     ]
-    for w, row in summary["levels"].items():
-        lines.append(
-            f"{w:>3} {row['wall_s']:>8.1f} {row['startup_s']:>8.1f} {row['best_J']:>8.4f} "
-            f"{row['time_to_target_s']:>12.2f} {row['trials_to_target']:>12.0f} "
-            f"{row['speedup_vs_first']:>8.2f}x"
-        )
     check = summary["constant_liar"]
     if check:
         lines.append(
@@ -274,19 +271,8 @@ def main(argv: list[str] | None = None) -> int:
             f"\nNOTE: this machine has {cpus} CPUs; W > {cpus} oversubscribes the cores, so "
             f"speed-ups beyond {cpus}x are not expected here (run with --address on a cluster)."
         )
-    record = {
-        "machine": {
-            "cpus": cpus,
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "optuna": optuna.__version__,
-        },
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
-        "summary": summaries,
-    }
-    (args.out_dir / "bo_scaling.json").write_text(json.dumps(record, indent=2, default=str))
-    print(f"wrote {args.out_dir}/bo_scaling_*.csv, *.png and bo_scaling.json")
+    record = {**header("bo_scaling", "optuna"), "args": settings(args), "summary": summaries}
+    write_json(args.out_dir / "bo_scaling.json", record, " and bo_scaling_*.csv, *.png beside it")
     return 0
 
 

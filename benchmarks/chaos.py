@@ -3,10 +3,10 @@ lander study on a 3-node loopback cluster, then prove that nothing was lost.
 
 The cluster is ``chronogym.cluster.LocalCluster`` (head + 2 worker nodes, 1 CPU each,
 ``ray start`` subprocesses). A killer thread with its own seeded RNG picks a random
-worker process of *this* cluster (``ray::EnvGroup`` during training, ``ray::TrialWorker``
-during the study; other Ray clusters on the machine are never touched) at random
-intervals and SIGKILLs it, and once per phase kills every process of one worker node
-(raylet, agents, actors).
+worker process of *this* cluster (``ray::SocketWorker`` or ``ray::EnvGroup`` during
+training, ``ray::TrialWorker`` during the study; other Ray clusters on the machine are never
+touched) at random intervals and SIGKILLs it, and once per phase kills every process of one
+worker node (raylet, agents, actors).
 
 1. Training: ``train`` (RSL-RL PPO) on ``make_quadruped_vec_env`` (8 Go1 envs, 2 Ray
    workers of 4, spread). Counted from the vector env's steps: episodes finished,
@@ -27,10 +27,7 @@ Prints a table and writes ``benchmarks/results/chaos.json``; exits 1 if a check 
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import os
-import platform
 import signal
 import sys
 import tempfile
@@ -43,8 +40,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from common import RESULTS, header, proc_cmdline, write_json
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "chaos.json"
+DEFAULT_OUT = RESULTS / "chaos.json"
+#: Process titles of RayVectorEnv's workers: the socket transport's actor class is SocketWorker
+#: (an EnvGroup), the actor transport's EnvGroup.
+ENV_WORKERS = ("ray::EnvGroup", "ray::SocketWorker")
 
 
 @dataclass(frozen=True)
@@ -78,15 +79,11 @@ SHORT = Settings(
 # -- chaos ---------------------------------------------------------------------------------
 def process_title(pid: int) -> str:
     """What ``ps`` shows for ``pid`` (Ray actors rename themselves ``ray::Class.method``)."""
-    try:
-        raw = Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return ""
-    return raw.replace(b"\0", b" ").decode(errors="replace").strip()
+    return " ".join(proc_cmdline(pid))
 
 
-def cluster_actors(cluster: Any, prefix: str) -> list[tuple[int, str]]:
-    """(pid, node) of this cluster's processes whose title starts with ``prefix``."""
+def cluster_actors(cluster: Any, prefix: str | tuple[str, ...]) -> list[tuple[int, str]]:
+    """(pid, node) of this cluster's processes whose title starts with ``prefix`` (or one of)."""
     found = []
     for node in cluster.nodes:
         for pid in node.pids():
@@ -102,7 +99,7 @@ class Killer(threading.Thread):
     def __init__(
         self,
         cluster: Any,
-        prefix: str,
+        prefix: str | tuple[str, ...],
         every: tuple[float, float],
         seed: int,
         node_when: Callable[[], bool] | None = None,
@@ -247,7 +244,7 @@ def chaos_training(cluster: Any, settings: Settings, seed: int, out: Path) -> di
     node_at = max(2, settings.iterations // 3)
     killer = Killer(
         cluster,
-        "ray::EnvGroup",
+        ENV_WORKERS,
         settings.kill_every,
         seed,
         node_when=lambda: counter.iteration >= node_at,
@@ -443,31 +440,21 @@ def main() -> int:
     from chronogym.cluster import LocalCluster
 
     with tempfile.TemporaryDirectory() as tmp, LocalCluster(workers=2, num_cpus=1) as cluster:
-        ray = cluster.connect()
+        cluster.connect()
         training = chaos_training(cluster, settings, args.seed, Path(tmp) / "train")
         study = chaos_study(cluster, settings, args.seed, Path(tmp) / "chaos.db")
-        version = ray.__version__
     results = checks(training, study, args.rss_bound_mib)
     print_report(training, study, results)
     report = {
-        "benchmark": "chaos",
+        **header("chaos", "torch", "optuna"),
         "mode": "short" if args.short else "full",
         "seed": args.seed,
         "settings": settings.__dict__,
         "training": training,
         "study": study,
         "checks": results,
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "ray": version,
-            "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        },
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2, default=str))
-    print(f"wrote {args.out}")
+    write_json(args.out, report)
     return 0 if all(results.values()) else 1
 
 

@@ -1,6 +1,6 @@
 """The lander in MuJoCo and in Project Chrono: the same designs dropped on rigid ground.
 
-``LanderSim`` (MuJoCo) and ``ChronoLanderSim`` (PyChrono, ``chronogym.tasks.lander.chrono_sim``)
+``LanderSim`` (MuJoCo) and ``ChronoLanderSim`` (PyChrono, ``chronogym.tasks.lander.chrono.sim``)
 build the same 25 bodies (Chrono reads MuJoCo's masses and inertias), the same joints and the
 same honeycomb law, and compute the metrics with the same code (``landing.Landing``). Each
 design lands once per engine at its default settings (MuJoCo 0.5 ms; Chrono 0.25 ms, SMC
@@ -50,23 +50,19 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime
-import json
 import math
-import os
 import platform
 import sys
 import time
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-import mujoco
 import numpy as np
+from common import RESULTS, header, pyplot, save_figure, versions, write_json
 
 from chronogym.tasks.lander import DEFAULT_DESIGN, LanderDesign, LanderParams, LanderSim
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "cross_engine.json"
+DEFAULT_OUT = RESULTS / "cross_engine.json"
 #: name -> design: the default and one at each bound of every design variable.
 DESIGNS: dict[str, LanderDesign] = {
     "default": DEFAULT_DESIGN,
@@ -124,10 +120,7 @@ def print_table(results: dict[str, dict[str, Any]]) -> None:
 def plot(histories: dict[str, dict[str, Any]], path: Path) -> bool:
     """|a| (20 ms box filter) against time per design and engine; False without matplotlib."""
     try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
     except ImportError:
         return False
     fig, axes = plt.subplots(1, len(histories), figsize=(4 * len(histories), 3.4), sharey=False)
@@ -141,9 +134,7 @@ def plot(histories: dict[str, dict[str, Any]], path: Path) -> bool:
         ax.set_xlabel("t [s]")
     np.atleast_1d(axes)[0].set_ylabel("|a| chassis, 20 ms box [m/s²]")
     np.atleast_1d(axes)[0].legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
     return True
 
 
@@ -161,13 +152,6 @@ def convergence(chrono_sim: type, settings: type) -> list[dict[str, Any]]:
     return rows
 
 
-def _version(name: str) -> str:
-    try:
-        return metadata.version(name)
-    except metadata.PackageNotFoundError:
-        return "unknown (no package metadata)"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
@@ -182,8 +166,8 @@ def main() -> None:
         import_pychrono()
     except ModuleNotFoundError as exc:
         sys.exit(f"cross_engine.py needs PyChrono: {exc}")
-    from chronogym.tasks.lander.chrono_model import ChronoSettings
-    from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+    from chronogym.tasks.lander.chrono.model import ChronoSettings
+    from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
     params = LanderParams()
     results: dict[str, dict[str, Any]] = {}
@@ -205,23 +189,18 @@ def main() -> None:
     print_table(results)
     steps = convergence(ChronoLanderSim, ChronoSettings) if args.convergence else []
     png = args.out.with_suffix(".png")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     plotted = plot(histories, png)
     result = {
-        "benchmark": "cross_engine",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+        **header("cross_engine", "pychrono"),
+        # also at the top, as earlier records had them
         "python": platform.python_version(),
-        "mujoco": mujoco.__version__,
-        "pychrono": _version("pychrono"),
-        "numpy": np.__version__,
+        **versions("mujoco", "pychrono", "numpy"),
         "params": dataclasses.asdict(params),
         "chrono_settings": dataclasses.asdict(ChronoSettings()),
         "designs": results,
         "chrono_convergence": steps,
     }
-    args.out.write_text(json.dumps(result, indent=2, allow_nan=True))
-    print(f"wrote {args.out}" + (f" and {png}" if plotted else " (no matplotlib: no plot)"))
+    write_json(args.out, result, f" and {png}" if plotted else " (no matplotlib: no plot)")
     if not math.isfinite(sum(r["chrono"]["J"] for r in results.values())):
         sys.exit("a Chrono landing gave a non-finite J")
 

@@ -23,19 +23,16 @@ Prints a table and writes ``benchmarks/results/multinode.json``.
 from __future__ import annotations
 
 import argparse
-import datetime
 import hashlib
-import json
-import os
-import platform
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from common import RESULTS, header, write_json
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "multinode.json"
+DEFAULT_OUT = RESULTS / "multinode.json"
 GO1 = "chronogym/Go1Velocity-v0"
 NUM_ENVS = 6
 ENVS_PER_WORKER = 2
@@ -209,10 +206,8 @@ def main() -> None:
     print_table(rows, serial)
     for row in rows:
         row["identical_to_serial"] = row["sha256"] == serial_sha
-    import ray
-
     report = {
-        "benchmark": "multinode",
+        **header("multinode", "torch", "optuna"),
         "env": GO1,
         "num_envs": NUM_ENVS,
         "envs_per_worker": ENVS_PER_WORKER,
@@ -220,17 +215,8 @@ def main() -> None:
         "serial": serial,
         "results": rows,
         "note": "all nodes share one machine: overhead of crossing raylets, not a speed-up",
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "ray": ray.__version__,
-            "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        },
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, report)
 
 
 if __name__ == "__main__":

@@ -17,23 +17,21 @@ Prints a table and writes JSON. Timings are one core, best of ``--repeats``.
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import math
-import platform
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import mujoco
 import numpy as np
+from common import RESULTS, Column, header, table, versions, write_json
 
 import chronogym  # noqa: F401  (sets the GL backend before mujoco rendering is touched)
 from chronogym.env import SimEnv
 from chronogym.tasks.quadruped import DEFAULT_JOINT_POS, FOOT_GEOM_NAMES, Go1VelocityTask
 from chronogym.tasks.quadruped.model import go1_xml_path
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "quadruped_physics.json"
+DEFAULT_OUT = RESULTS / "quadruped_physics.json"
 CONTROL_DT = 0.02
 STEPS = 1500  # policy steps per timing
 SETTINGS = [  # (cone, dt, impratio)
@@ -44,6 +42,19 @@ SETTINGS = [  # (cone, dt, impratio)
     ("elliptic", 0.002, 100.0),
     ("pyramidal", 0.01, 1.0),
 ]
+
+
+COLUMNS = (
+    Column("cone", 9, key="cone"),
+    Column("dt", 6, "{:.3f}", key="dt"),
+    Column("impratio", 8, "{:.0f}", key="impratio"),
+    Column("k", 3, "{:d}", key="k"),
+    Column("raw_us", 8, "{:.1f}", key="raw_us"),
+    Column("stand_h", 8, "{:.4f}", key="stand_h"),
+    Column("slip_mm", 8, "{:.2f}", key="slip_mm"),
+    Column("task_us", 8, "{:.1f}", key="task_us"),
+    Column("task/raw", 8, "{:.2f}", key="task_over_raw"),
+)
 
 
 @dataclass
@@ -165,27 +176,15 @@ def main() -> None:
     task_us, raw_us = task_cost(env, targets, args.repeats)
     chosen.task_us = task_us
     chosen.task_over_raw = task_us / raw_us
-    header = f"{'cone':>9} {'dt':>6} {'impratio':>8} {'k':>3} {'raw_us':>8} {'stand_h':>8} "
-    header += f"{'slip_mm':>8} {'task_us':>8} {'task/raw':>8}"
-    print(header)
-    for row in rows:
-        task = f"{row.task_us:8.1f} {row.task_over_raw:8.2f}" if row.task_us else f"{'':>8} {'':>8}"
-        print(
-            f"{row.cone:>9} {row.dt:6.3f} {row.impratio:8.0f} {row.k:3d} {row.raw_us:8.1f} "
-            f"{row.stand_h:8.4f} {row.slip_mm:8.2f} {task}"
-        )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
+    print(table(COLUMNS, rows, sep=" ", missing=""))
     result = {
-        "benchmark": "quadruped_physics",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"platform": platform.platform(), "cpus": __import__("os").cpu_count()},
-        "mujoco": mujoco.__version__,
+        **header("quadruped_physics"),
+        **versions("mujoco"),  # also at the top, as earlier records had it
         "control_dt": CONTROL_DT,
         "policy_steps": STEPS,
         "rows": [asdict(row) for row in rows],
     }
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, result)
 
 
 if __name__ == "__main__":

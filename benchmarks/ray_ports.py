@@ -13,17 +13,22 @@ is up. Linux only (it reads ``/proc``).
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import os
-import platform
 import socket
 import struct
 from pathlib import Path
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "ray_ports.json"
+from common import RESULTS, Column, header, proc_cmdline, proc_stat, table, versions, write_json
+
+DEFAULT_OUT = RESULTS / "ray_ports.json"
 LISTEN = "0A"  # TCP state LISTEN in /proc/net/tcp
 DASHBOARD_PORT = 8265
+COLUMNS = (
+    Column("process", 28, align="<", key="process"),
+    Column("address", 16, align="<", key="address"),
+    Column("port", 7, key="port"),
+    Column("exposure", 0, align="<", key="exposure"),
+)
 
 
 def _address(hex_address: str, family: int) -> str:
@@ -53,14 +58,9 @@ def listening_sockets() -> dict[str, tuple[str, int]]:
 
 def process_name(pid: int) -> str:
     """A short name: Ray's process title (``ray::...``, ``raylet``, ``gcs_server``)."""
-    try:
-        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-    except OSError:
-        return "?"
-    first = cmdline[0].decode(errors="replace")
-    if first.startswith("ray::"):
-        return first.split()[0]
-    parts = [c.decode(errors="replace") for c in cmdline if c]
+    parts = proc_cmdline(pid)
+    if parts and parts[0].startswith("ray::"):
+        return parts[0].split()[0]
     for part in parts:
         base = os.path.basename(part)
         if base in ("raylet", "gcs_server") or base.endswith(".py"):
@@ -108,10 +108,9 @@ def descendants(root: int) -> set[int]:
         if not entry.isdigit():
             continue
         try:
-            stat = Path(f"/proc/{entry}/stat").read_text()
+            parent = int(proc_stat(entry)[1])
         except OSError:
             continue
-        parent = int(stat.rsplit(")", 1)[1].split()[1])
         children.setdefault(parent, []).append(int(entry))
     found, todo = {root}, [root]
     while todo:
@@ -145,23 +144,17 @@ def main() -> None:
     finally:
         vec.close()
         ray.shutdown()
-    print(f"{'process':<28} {'address':<16} {'port':>6}  exposure")
-    for row in rows:
-        print(f"{row['process']:<28} {row['address']:<16} {row['port']:>6}  {row['exposure']}")
+    print(table(COLUMNS, rows, sep=" "))
     print(f"RAY_AUTH_MODE={auth_mode!r}; dashboard on :{DASHBOARD_PORT}: {dashboard_up}")
     result = {
-        "benchmark": "ray_ports",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-        "ray": ray.__version__,
+        **header("ray_ports"),
+        **versions("ray"),  # also at the top, as earlier records had it
         "auth_mode": auth_mode,
         "dashboard_listening": dashboard_up,
         "dashboard_url": dashboard_url,
         "sockets": rows,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, result)
 
 
 if __name__ == "__main__":

@@ -17,15 +17,15 @@ from __future__ import annotations
 
 import argparse
 import csv
-import datetime
-import json
 import math
 import os
-import platform
 import shutil
 from pathlib import Path
+from typing import Any
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "rl_scaling"
+from common import RESULTS, Column, header, pyplot, save_figure, table, write_json
+
+DEFAULT_OUT = RESULTS / "rl_scaling"
 DEFAULT_RUNS = Path("runs") / "rl_scaling"  # checkpoints and TensorBoard events (not results)
 DEFAULT_CONFIGS = ("ray-1", "ray-8", "ray-16", "serial-16")
 SHORT_MINUTES = 2.0
@@ -86,12 +86,7 @@ def smoothed(values: list[float], window: int = 5) -> list[float]:
 
 def plot(summaries: list[dict], path: Path, title: str) -> None:
     """The paper's three panels (reward, x and y velocity MSE against wall time)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    fig, axes = pyplot().subplots(1, 3, figsize=(15, 4.2))
     panels = (
         ("mean_reward", "mean episode reward"),
         ("x_mse", "episode-mean x-velocity MSE (m/s)²"),
@@ -112,62 +107,89 @@ def plot(summaries: list[dict], path: Path, title: str) -> None:
             axis.set_yscale("log")
     axes[0].legend(title="backend-n_env")
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
+
+
+TABLE_COLUMNS = (
+    Column("config", 10, key="config"),
+    Column("iters", 6, "{:d}", key="iterations"),
+    Column("env steps", 10, "{:d}", key="env_steps"),
+    Column("steps/s", 8, "{:.0f}", key="env_steps_per_s"),
+    Column("reward", 8, "{:.2f}", key="mean_reward"),
+    Column("x_mse", 7, "{:.4f}", key="x_mse"),
+    Column("y_mse", 7, "{:.4f}", key="y_mse"),
+)
 
 
 def print_table(summaries: list[dict]) -> None:
     """One row per configuration: iterations, env steps, throughput, last iteration's means."""
-    print(
-        f"{'config':>10} {'iters':>6} {'env steps':>10} {'steps/s':>8} {'reward':>8} "
-        f"{'x_mse':>7} {'y_mse':>7}"
-    )
-    for s in summaries:
-        final = s["final"]
-        print(
-            f"{s['config']:>10} {s['iterations']:6d} {s['env_steps']:10d} "
-            f"{s['env_steps_per_s']:8.0f} {final.get('mean_reward', math.nan):8.2f} "
-            f"{final.get('x_mse', math.nan):7.4f} {final.get('y_mse', math.nan):7.4f}"
-        )
+    final = ("mean_reward", "x_mse", "y_mse")
+    rows = [{**s, **{key: s["final"].get(key, math.nan) for key in final}} for s in summaries]
+    print(table(TABLE_COLUMNS, rows, sep=" "))
+
+
+def write_results(summaries: list[dict], out: Path, name: str, title: str, **fields: Any) -> None:
+    """``<name>.png`` (the three panels) and ``<name>.json`` (the header, ``fields`` and the
+    configurations' summaries) in ``out``."""
+    png = out / f"{name}.png"
+    plot(summaries, png, title)
+    record = {**header(name, "torch"), **fields, "configs": summaries}
+    write_json(out / f"{name}.json", record, f" and {png}")
+
+
+def add_run_flags(
+    parser: argparse.ArgumentParser, configs: tuple[str, ...], out: Path, runs: Path
+) -> None:
+    """``--configs``, ``--seed``, ``--out`` and ``--runs`` (also ``soil_finetune.py``'s)."""
+    parser.add_argument("--configs", nargs="+", default=list(configs))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=out, help="CSVs, PNG and JSON")
+    parser.add_argument("--runs", type=Path, default=runs, help="checkpoints, events")
+
+
+def check_run_flags(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, minutes: float
+) -> None:
+    """Stop with a usage error on a bad ``--configs`` name or budget."""
+    for name in args.configs:
+        try:
+            parse_config(name)
+        except argparse.ArgumentTypeError as error:
+            parser.error(str(error))
+    if not minutes > 0:
+        parser.error(f"--minutes={minutes}: expected > 0")
+
+
+def run_configs(
+    args: argparse.Namespace, minutes: float, what: str, **train_kwargs: Any
+) -> list[dict]:
+    """Train each configuration (printing ``== <config>: <what>``), print the table; the
+    summaries."""
+    args.out.mkdir(parents=True, exist_ok=True)
+    summaries = []
+    for name in args.configs:
+        print(f"== {name}: {what}")
+        summaries.append(run_config(name, minutes, args.out, args.runs, args.seed, **train_kwargs))
+    print_table(summaries)
+    return summaries
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=None, help="budget per configuration")
     parser.add_argument("--full", action="store_true", help=f"{FULL_MINUTES:g} min each")
-    parser.add_argument("--configs", nargs="+", default=list(DEFAULT_CONFIGS))
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="CSVs, PNG and JSON")
-    parser.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="checkpoints, events")
+    add_run_flags(parser, DEFAULT_CONFIGS, DEFAULT_OUT, DEFAULT_RUNS)
     args = parser.parse_args()
-    for name in args.configs:
-        parse_config(name)
     minutes = args.minutes or (FULL_MINUTES if args.full else SHORT_MINUTES)
-    if not minutes > 0:
-        parser.error(f"--minutes={minutes}: expected > 0")
-    args.out.mkdir(parents=True, exist_ok=True)
-    summaries = []
-    for name in args.configs:
-        print(f"== {name}: {minutes:g} min")
-        summaries.append(run_config(name, minutes, args.out, args.runs, args.seed))
-    print_table(summaries)
-    png = args.out / "rl_scaling.png"
+    check_run_flags(parser, args, minutes)
+    summaries = run_configs(args, minutes, f"{minutes:g} min")
     title = (
         f"Go1 velocity tracking, PPO [512, 256, 128], {minutes:g} min per configuration, "
         f"{os.cpu_count()} CPUs"
     )
-    plot(summaries, png, title)
-    result = {
-        "benchmark": "rl_scaling",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-        "minutes_per_config": minutes,
-        "seed": args.seed,
-        "configs": summaries,
-    }
-    (args.out / "rl_scaling.json").write_text(json.dumps(result, indent=2))
-    print(f"wrote {png} and {args.out / 'rl_scaling.json'}")
+    write_results(
+        summaries, args.out, "rl_scaling", title, minutes_per_config=minutes, seed=args.seed
+    )
 
 
 if __name__ == "__main__":

@@ -24,7 +24,6 @@ load on the machine hits every value alike.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import select
 import socket
@@ -35,12 +34,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import throughput  # this script's folder: the machine and timing helpers
+import throughput_timing as timing  # this script's folder: the cart-pole timing helpers
+from common import RESULTS, Column, cpu_percent, header, settings, table, write_json
 from tqdm import tqdm
 
 import chronogym
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "socket_spin.json"
+DEFAULT_OUT = RESULTS / "socket_spin.json"
 
 
 @dataclass(frozen=True)
@@ -127,10 +127,10 @@ def time_steps(env: Any, steps: int, think_us: float, seed: int) -> float:
 def measure(shape: Shape, spin_us: float, args: argparse.Namespace) -> list[dict[str, float]]:
     """One RayVectorEnv: µs/vstep and CPU use for each think time."""
     env = chronogym.RayVectorEnv(
-        throughput.ENV_ID,
+        timing.ENV_ID,
         shape.num_envs,
         envs_per_worker=shape.envs_per_worker,
-        env_kwargs={"k": shape.k, **throughput.TASK_KWARGS},
+        env_kwargs={"k": shape.k, **timing.TASK_KWARGS},
         transport="socket",
         spin_us=spin_us,
     )
@@ -144,7 +144,7 @@ def measure(shape: Shape, spin_us: float, args: argparse.Namespace) -> list[dict
             def run(t: float = think, out: list[float] = timed) -> None:
                 out.append(time_steps(env, args.steps, t, args.seed))
 
-            cpu = throughput.cpu_percent(pids, run)
+            cpu = cpu_percent(pids, run)
             cells.append({"think_us": think, "us": timed[0], **cpu})
         return cells
     finally:
@@ -188,14 +188,14 @@ def pingpong_us(spin_s: float, rounds: int = 5000) -> float:
 
 def physics_us(k: int, seed: int) -> float:
     """What one env step of ``k`` ticks costs in the raw loop, µs."""
-    steps, elapsed = throughput.run_raw(k, 0.5, seed)
+    steps, elapsed = timing.run_raw(k, 0.5, seed)
     return elapsed / steps * 1e6
 
 
 def run(args: argparse.Namespace) -> list[Row]:
     """Every shape x cost x spin, ``repeat`` interleaved rounds; medians per cell."""
-    tick = throughput.measure_tick_us(0.5, args.seed)
-    levels = throughput.choose_levels(args.targets_us, tick)
+    tick = timing.measure_tick_us(0.5, args.seed)
+    levels = timing.choose_levels(args.targets_us, tick)
     shapes = [
         Shape(int(num), int(per), level.target_us, level.k)
         for spec in args.shapes
@@ -234,25 +234,25 @@ def run(args: argparse.Namespace) -> list[Row]:
     return rows
 
 
+COLUMNS = (
+    Column("phys/step", 9, "{:.0f}µs", key="physics_us_per_step"),
+    *timing.SHAPE_COLUMNS,
+    Column("think", 6, "{:.0f}µs", key="think_us"),
+    Column("spin_us", 7, "{:.0f}", key="spin_us"),
+    Column("µs/vstep", 9, "{:.0f}", key="us_per_vstep"),
+    Column("x_spin0", 7, "{:.2f}", key="x_spin0"),
+    Column("cpu-w", 6, "{:.0f}%", key="cpu_workers"),
+    Column("cpu-d", 6, "{:.0f}%", key="cpu_driver"),
+)
+
+
 def format_table(rows: list[Row]) -> str:
     """Aligned table, one line per cell."""
-    head = (
-        f"{'phys/step':>9}  {'N':>3}  {'wrk':>3}  {'e/w':>3}  {'think':>6}  {'spin_us':>7}  "
-        f"{'µs/vstep':>9}  {'x_spin0':>7}  {'cpu-w':>6}  {'cpu-d':>6}"
-    )
-    lines = [head, "-" * len(head)]
     order = sorted(
         rows,
         key=lambda r: (r.physics_us_per_step, r.num_envs, r.envs_per_worker, r.think_us, r.spin_us),
     )
-    for r in order:
-        lines.append(
-            f"{r.physics_us_per_step:>7.0f}µs  {r.num_envs:>3}  {r.workers:>3}  "
-            f"{r.envs_per_worker:>3}  {r.think_us:>4.0f}µs  {r.spin_us:>7.0f}  "
-            f"{r.us_per_vstep:>9.0f}  {r.x_spin0:>7.2f}  {r.cpu_workers:>5.0f}%  "
-            f"{r.cpu_driver:>5.0f}%"
-        )
-    return "\n".join(lines)
+    return table(COLUMNS, order, rule=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -264,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
         f"socketpair round trip between two processes: {pingpong['blocking']:.1f} µs with "
         f"blocking reads, {pingpong['spinning_1ms']:.1f} µs when both ends spin\n"
     )
-    throughput.start_ray()
+    timing.start_ray()
     rows = run(args)
     print(format_table(rows))
     print(
@@ -272,15 +272,13 @@ def main(argv: list[str] | None = None) -> int:
         "this row's; cpu-w, cpu-d = % of one core used by the workers (summed) / the driver."
     )
     record = {
-        "benchmark": "socket transport spin before blocking reads",
-        "machine": throughput.machine_info(),
+        **header("socket transport spin before blocking reads"),
         "pingpong_us": pingpong,
-        "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
+        "settings": settings(args),
         "rows": [asdict(r) for r in rows],
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(record, indent=2) + "\n")
-    print(f"\nwrote {args.out} ({time.perf_counter() - wall:.0f} s in all)")
+    print()
+    write_json(args.out, record, f" ({time.perf_counter() - wall:.0f} s in all)")
     return 0
 
 

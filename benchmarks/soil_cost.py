@@ -28,25 +28,21 @@ of a soil episode against a rigid one, as training pays it.
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import math
-import os
-import platform
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import mujoco
-import numba
 import numpy as np
+from common import RESULTS, Column, header, table, versions, write_json
 from quadruped_physics import action_sequence  # same seeded targets (this script's folder)
 
 import chronogym  # noqa: F401  (sets the GL backend before mujoco rendering is touched)
 from chronogym.tasks.quadruped import FOOT_GEOM_NAMES, LEG_NAMES, load_go1
 from chronogym.terrain import MujocoSoil
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "soil_cost.json"
+DEFAULT_OUT = RESULTS / "soil_cost.json"
 DT, SUBSTEPS = 0.005, 4
 EXTENT, RESOLUTION = (8.0, 8.0), 0.01
 SETTINGS = [  # (name, preset or None for rigid, soil geoms)
@@ -56,6 +52,24 @@ SETTINGS = [  # (name, preset or None for rigid, soil geoms)
     ("firm/legs", "firm", "legs"),
     ("soft/legs", "soft", "legs"),
 ]
+
+
+ROW_COLUMNS = (
+    Column("setting", 10, key="setting"),
+    Column("us/step", 8, "{:.1f}", key="us_per_step"),
+    Column("ratio", 6, "{:.2f}", key="ratio"),
+    Column("base_h", 7, "{:.3f}", key="base_height"),
+    Column("sink_mm", 8, "{:.1f}", key="max_sinkage_mm"),
+    Column("falls", 5, "{:d}", key="falls"),
+    Column("ncon", 5, "{:.2f}", key="contacts_per_step"),
+)
+EPISODE_COLUMNS = (
+    Column("terrain", 8, key="terrain"),
+    Column("dt_ms", 6, "{:.1f}", key="dt_ms"),
+    Column("k", 3, "{:d}", key="k"),
+    Column("us/policy step", 15, "{:.1f}", key="us_per_policy_step"),
+    Column("ratio", 6, "{:.2f}", key="ratio"),
+)
 
 
 @dataclass
@@ -186,29 +200,13 @@ def main() -> None:
         if preset is None:
             rigid_us = us
         rows.append(Row(name, us, us / rigid_us, **stats))
-    print(f"{'setting':>10} {'us/step':>8} {'ratio':>6} {'base_h':>7} {'sink_mm':>8} ", end="")
-    print(f"{'falls':>5} {'ncon':>5}")
-    for row in rows:
-        print(
-            f"{row.setting:>10} {row.us_per_step:8.1f} {row.ratio:6.2f} {row.base_height:7.3f} "
-            f"{row.max_sinkage_mm:8.1f} {row.falls:5d} {row.contacts_per_step:5.2f}"
-        )
+    print(table(ROW_COLUMNS, rows, sep=" "))
     episodes = task_episodes(targets, max(1, args.repeats // 2))
     print("\nGo1 task, SimEnv.step at each terrain's default physics step (policy at 50 Hz):")
-    print(f"{'terrain':>8} {'dt_ms':>6} {'k':>3} {'us/policy step':>15} {'ratio':>6}")
-    for row in episodes:
-        print(
-            f"{row['terrain']:>8} {row['dt'] * 1e3:6.1f} {row['k']:3d} "
-            f"{row['us_per_policy_step']:15.1f} {row['ratio']:6.2f}"
-        )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
+    print(table(EPISODE_COLUMNS, [{**r, "dt_ms": r["dt"] * 1e3} for r in episodes], sep=" "))
     result = {
-        "benchmark": "soil_cost",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-        "mujoco": mujoco.__version__,
-        "numpy": np.__version__,
-        "numba": numba.__version__,
+        **header("soil_cost", "numba"),
+        **versions("mujoco", "numpy", "numba"),  # also at the top, as earlier records had them
         "first_advance_s": first_advance_s,
         "dt": DT,
         "substeps": SUBSTEPS,
@@ -219,9 +217,8 @@ def main() -> None:
         "rows": [asdict(row) for row in rows],
         "task_episodes": episodes,
     }
-    args.out.write_text(json.dumps(result, indent=2))
     print(f"first soil tick (kernel compile or cache load): {first_advance_s:.2f} s")
-    print(f"wrote {args.out}")
+    write_json(args.out, result)
 
 
 if __name__ == "__main__":

@@ -20,16 +20,19 @@ Without a rigid checkpoint (``--checkpoint``, default ``runs/go1-rigid/latest.pt
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import math
 import os
-import platform
 from pathlib import Path
 
-from rl_scaling import parse_config, plot, print_table, run_config  # this script's folder
+from common import RESULTS
+from rl_scaling import (  # this script's folder
+    add_run_flags,
+    check_run_flags,
+    run_configs,
+    write_results,
+)
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "soil_finetune"
+DEFAULT_OUT = RESULTS / "soil_finetune"
 DEFAULT_RUNS = Path("runs") / "soil_finetune"  # checkpoints and TensorBoard events
 DEFAULT_CHECKPOINT = Path("runs") / "go1-rigid" / "latest.pt"
 DEFAULT_CONFIGS = ("serial-16", "ray-8", "ray-16")
@@ -66,26 +69,16 @@ def evaluate_on_soil(checkpoint: str | Path, episodes: int, seed: int) -> dict[s
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=SHORT_MINUTES, help="per configuration")
-    parser.add_argument("--configs", nargs="+", default=list(DEFAULT_CONFIGS))
     parser.add_argument("--checkpoint", type=Path, default=DEFAULT_CHECKPOINT)
     parser.add_argument("--rigid-minutes", type=float, default=10.0)
     parser.add_argument("--eval-episodes", type=int, default=2, help="per command (0: skip)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="CSVs, PNG and JSON")
-    parser.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="checkpoints, events")
+    add_run_flags(parser, DEFAULT_CONFIGS, DEFAULT_OUT, DEFAULT_RUNS)
     args = parser.parse_args()
-    for name in args.configs:
-        parse_config(name)
-    if not args.minutes > 0:
-        parser.error(f"--minutes={args.minutes}: expected > 0")
-    args.out.mkdir(parents=True, exist_ok=True)
+    check_run_flags(parser, args, args.minutes)  # before a rigid checkpoint is trained
     checkpoint = rigid_checkpoint(args.checkpoint, args.rigid_minutes, args.seed)
-    summaries = []
-    for name in args.configs:
-        print(f"== {name}: fine-tune on soil for {args.minutes:g} min from {checkpoint}")
-        kwargs = {"resume": checkpoint, "terrain": "soil", "finetune": True}
-        summaries.append(run_config(name, args.minutes, args.out, args.runs, args.seed, **kwargs))
-    print_table(summaries)
+    what = f"fine-tune on soil for {args.minutes:g} min from {checkpoint}"
+    kwargs = {"resume": checkpoint, "terrain": "soil", "finetune": True}
+    summaries = run_configs(args, args.minutes, what, **kwargs)
     evaluation = {}
     if args.eval_episodes > 0:
         print(f"deterministic policy on soil, {args.eval_episodes} episode(s) per command:")
@@ -95,24 +88,20 @@ def main() -> None:
             evaluation[label] = evaluate_on_soil(path, args.eval_episodes, args.seed)
             e = evaluation[label]
             print(f"{label:>10} {e['survival']:8.2f} {e['x_vel_mse']:7.4f} {e['y_vel_mse']:7.4f}")
-    png = args.out / "soil_finetune.png"
     title = (
         f"Go1 fine-tuned from rigid ground onto SCM soil (firm), conservative PPO, "
         f"{args.minutes:g} min per configuration, {os.cpu_count()} CPUs"
     )
-    plot(summaries, png, title)
-    result = {
-        "benchmark": "soil_finetune",
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-        "minutes_per_config": args.minutes,
-        "seed": args.seed,
-        "rigid_checkpoint": str(checkpoint),
-        "configs": summaries,
-        "evaluation_on_soil": {"commands": EVAL_COMMANDS, "policies": evaluation},
-    }
-    (args.out / "soil_finetune.json").write_text(json.dumps(result, indent=2))
-    print(f"wrote {png} and {args.out / 'soil_finetune.json'}")
+    write_results(
+        summaries,
+        args.out,
+        "soil_finetune",
+        title,
+        minutes_per_config=args.minutes,
+        seed=args.seed,
+        rigid_checkpoint=str(checkpoint),
+        evaluation_on_soil={"commands": EVAL_COMMANDS, "policies": evaluation},
+    )
 
 
 if __name__ == "__main__":

@@ -14,15 +14,20 @@ from __future__ import annotations
 
 import argparse
 import csv
-import datetime
-import json
-import os
-import platform
 import statistics
 import tempfile
 from pathlib import Path
 
-DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "torch_threads.json"
+from common import RESULTS, Column, header, table, write_json
+
+DEFAULT_OUT = RESULTS / "torch_threads.json"
+COLUMNS = (
+    Column("backend", 8, key="backend"),
+    Column("threads", 8, key="torch_threads"),
+    Column("collect s", 10, "{:.3f}", key="collect_s"),
+    Column("learn s", 8, "{:.3f}", key="learn_s"),
+    Column("steps/s", 8, "{:.0f}", key="env_steps_per_s"),
+)
 
 
 def run(backend: str, num_envs: int, threads: int | None, iterations: int) -> dict:
@@ -69,26 +74,9 @@ def main() -> None:
     for backend, threads in configs:
         print(f"== {backend}, {args.num_envs} envs, torch threads {threads or 'default'}")
         results.append(run(backend, args.num_envs, threads, args.iterations))
-    print(f"{'backend':>8} {'threads':>8} {'collect s':>10} {'learn s':>8} {'steps/s':>8}")
-    for r in results:
-        print(
-            f"{r['backend']:>8} {r['torch_threads']!s:>8} {r['collect_s']:10.3f} "
-            f"{r['learn_s']:8.3f} {r['env_steps_per_s']:8.0f}"
-        )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(
-        json.dumps(
-            {
-                "benchmark": "torch_threads",
-                "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-                "iterations": args.iterations,
-                "results": results,
-            },
-            indent=2,
-        )
-    )
-    print(f"wrote {args.out}")
+    print(table(COLUMNS, results, sep=" "))
+    record = {**header("torch_threads", "torch"), "iterations": args.iterations}
+    write_json(args.out, {**record, "results": results})
 
 
 if __name__ == "__main__":

@@ -12,14 +12,14 @@ if TYPE_CHECKING:
 NAMESPACE = "chronogym"
 
 TASKS: dict[str, str] = {
-    "CartPole-v0": "chronogym.tasks.cartpole:CartPoleTask",
+    "CartPole-v0": "chronogym.tasks.cartpole.mujoco:CartPoleTask",
     "Go1Velocity-v0": "chronogym.tasks.quadruped.task:Go1VelocityTask",
 }
 
 # Tasks on an optional engine: registered all the same (the id resolves lazily), but
 # ``gymnasium.make`` raises an error naming the missing package and how to install it.
 OPTIONAL_TASKS: dict[str, str] = {
-    "ChronoCartPole-v0": "chronogym.tasks.chrono_cartpole:ChronoCartPoleTask",  # pychrono
+    "ChronoCartPole-v0": "chronogym.tasks.cartpole.chrono:ChronoCartPoleTask",  # pychrono
 }
 
 

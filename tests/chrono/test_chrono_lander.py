@@ -29,7 +29,7 @@ P_SHORT = dataclasses.replace(LanderParams(), max_time=SHORT)
 @pytest.fixture(scope="module")
 def landing(chrono):
     """(Chrono sim, its metrics, MuJoCo's metrics): the default design, first SHORT s."""
-    from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+    from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
     sim = ChronoLanderSim(DEFAULT_DESIGN, P_SHORT)
     return sim, sim.run(), LanderSim(DEFAULT_DESIGN, P_SHORT).run()
@@ -37,7 +37,7 @@ def landing(chrono):
 
 def test_same_25_bodies_joints_and_masses_as_mujoco(chrono):
     from chronogym.engines.chrono import system_bodies
-    from chronogym.tasks.lander.chrono_model import BODY_NAMES, build_chrono_lander
+    from chronogym.tasks.lander.chrono.model import BODY_NAMES, build_chrono_lander
 
     p = LanderParams()
     model = build_chrono_lander(DEFAULT_DESIGN, p)
@@ -106,7 +106,7 @@ def test_energy_balance_closes(landing):
 
 
 def test_absorber_law_advances_once_per_tick_and_its_force_is_applied(chrono):
-    from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+    from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
     sim = ChronoLanderSim(DEFAULT_DESIGN, dataclasses.replace(P_SHORT, max_time=0.05))
     calls = []
@@ -128,7 +128,7 @@ def test_absorber_law_advances_once_per_tick_and_its_force_is_applied(chrono):
 
 
 def test_a_design_that_bottoms_out_lands_on_critically_damped_stops(chrono):
-    from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+    from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
     softest = DEFAULT_DESIGN.replace(f_y=1_000.0)  # bottoms out at 0.13 s
     sim = ChronoLanderSim(softest, dataclasses.replace(P_SHORT, max_time=0.16))
@@ -145,7 +145,7 @@ def test_a_design_that_bottoms_out_lands_on_critically_damped_stops(chrono):
 
 
 def test_landing_is_deterministic_and_reset_restores_it(chrono):
-    from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+    from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
     params = dataclasses.replace(P_SHORT, max_time=0.06)
     sim = ChronoLanderSim(DEFAULT_DESIGN, params)
@@ -185,7 +185,7 @@ def test_chrono_study_on_ray_completes_trials(chrono, ray_cluster, tmp_path):
 
 
 def test_stops_engage_beyond_a_stop_only_when_they_push_back():
-    from chronogym.tasks.lander.chrono_struts import stop_coefficients, stop_engagement
+    from chronogym.tasks.lander.chrono.struts import stop_coefficients, stop_engagement
 
     k, c = stop_coefficients(LanderParams())
     assert k == pytest.approx(2090 / 6 / 0.004**2) and c == pytest.approx(2 * 2090 / 6 / 0.004)
@@ -197,7 +197,7 @@ def test_stops_engage_beyond_a_stop_only_when_they_push_back():
 
 
 def test_chrono_lander_refuses_other_terrains_naming_what_it_supports():
-    from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+    from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
     for terrain in (Terrain(slope=0.1), Terrain(n_rocks=3), Terrain(soil="mars")):
         with pytest.raises(ValueError, match=r"supports flat rigid ground, Terrain\(\)"):
@@ -225,7 +225,7 @@ print("RAY STARTED" if ray is not None and ray.is_initialized() else "NO RAY")
 IMPORTS_ONLY = """
 import sys
 import chronogym, chronogym.cli, chronogym.optim.lander, chronogym.tasks.lander
-import chronogym.tasks.lander.chrono_sim
+import chronogym.tasks.lander.chrono.sim
 from chronogym.optim.lander import LanderObjective
 LanderObjective()  # the MuJoCo objective
 print("pychrono imported" if "pychrono" in sys.modules else "pychrono not imported")

@@ -87,7 +87,7 @@ def suggest_lander_design(trial: Any) -> dict[str, float]:
 def _simulation_class(engine: str) -> type:
     """``LanderSim`` (MuJoCo) or ``ChronoLanderSim`` (imported only when asked for)."""
     if engine == "chrono":
-        from chronogym.tasks.lander.chrono_sim import ChronoLanderSim
+        from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
         return ChronoLanderSim
     from chronogym.tasks.lander import LanderSim

@@ -11,28 +11,33 @@ scored by
 (peak filtered chassis acceleration against the deceleration that just uses the whole
 stroke, and how much of the initial energy the absorbers take).
 
-Modules:
+Modules, shared by both engines:
 
 * :mod:`~chronogym.tasks.lander.design` -- :class:`LanderDesign`, :data:`DESIGN_BOUNDS`,
   :class:`LanderParams` (every fixed parameter, documented);
 * :mod:`~chronogym.tasks.lander.absorber` -- :class:`HoneycombAbsorber`, the crush law;
-* :mod:`~chronogym.tasks.lander.model` -- the ``MjSpec`` model builder and its topology,
-  :class:`Terrain` (rigid plane, slope, rocks or soil) and :func:`terrain_params`;
+* :mod:`~chronogym.tasks.lander.geometry` -- :data:`N_LEGS`, :func:`leg_azimuths` and
+  :func:`leg_geometry` (the legs' points and frames every engine's builder uses);
+* :mod:`~chronogym.tasks.lander.terrain` -- :class:`Terrain` (rigid plane, slope, rocks or
+  soil) and :func:`terrain_params`;
 * :mod:`~chronogym.tasks.lander.landing` -- :class:`Landing`, the engine-independent
-  history, settling and metrics (:func:`objective`, :func:`filtered_acceleration`);
-* :mod:`~chronogym.tasks.lander.sim` -- :class:`LanderSim` and :func:`simulate_landing`
-  (MuJoCo; metrics, and the energy ledger whose terms are :data:`LEDGER_TERMS`);
-* :mod:`~chronogym.tasks.lander.chrono_model`, :mod:`~chronogym.tasks.lander.chrono_struts`
-  and :mod:`~chronogym.tasks.lander.chrono_sim` -- the same lander in Project Chrono
-  (:class:`ChronoLanderSim`, :class:`ChronoSettings`; flat rigid ground; needs PyChrono,
-  imported only when a Chrono lander is built).
+  history, settling and metrics (:func:`objective`, :func:`filtered_acceleration`).
+
+One sub-package per engine:
+
+* :mod:`~chronogym.tasks.lander.mujoco` -- ``model`` (the ``MjSpec`` model builder and its
+  topology) and ``sim`` (:class:`LanderSim` and :func:`simulate_landing`: metrics, and the
+  energy ledger whose terms are :data:`LEDGER_TERMS`);
+* :mod:`~chronogym.tasks.lander.chrono` -- ``model``, ``struts`` and ``sim``: the same lander
+  in Project Chrono (:class:`ChronoLanderSim`, :class:`ChronoSettings`; flat rigid ground;
+  needs PyChrono, imported only when a Chrono lander is built).
 
 No Gymnasium, Ray, Optuna or PyChrono import here (``chronogym.terrain``, numba, on soil).
 """
 
 from chronogym.tasks.lander.absorber import HoneycombAbsorber
-from chronogym.tasks.lander.chrono_model import ChronoSettings
-from chronogym.tasks.lander.chrono_sim import (
+from chronogym.tasks.lander.chrono.model import ChronoSettings
+from chronogym.tasks.lander.chrono.sim import (
     CHRONO_LEDGER_TERMS,
     ChronoLanderSim,
     simulate_chrono_landing,
@@ -44,18 +49,15 @@ from chronogym.tasks.lander.design import (
     LanderDesign,
     LanderParams,
 )
+from chronogym.tasks.lander.geometry import N_LEGS, leg_azimuths, leg_geometry
 from chronogym.tasks.lander.landing import Landing, filtered_acceleration, objective
-from chronogym.tasks.lander.model import (
-    N_LEGS,
+from chronogym.tasks.lander.mujoco.model import (
     LanderModelInfo,
-    Terrain,
     build_lander_model,
     build_lander_spec,
-    leg_azimuths,
-    leg_geometry,
-    terrain_params,
 )
-from chronogym.tasks.lander.sim import LEDGER_TERMS, LanderSim, simulate_landing
+from chronogym.tasks.lander.mujoco.sim import LEDGER_TERMS, LanderSim, simulate_landing
+from chronogym.tasks.lander.terrain import Terrain, terrain_params
 
 __all__ = [
     "CHRONO_LEDGER_TERMS",

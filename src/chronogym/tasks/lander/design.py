@@ -287,7 +287,7 @@ class LanderParams:
     #: knee loops alone stiffened: 22 m/s^2 at 0.004 s, 27 at 0.002 s, 29 at 0.001 s;
     #: ``alpha2`` = 50 deg: 54, 80, 112); hence the 20 ms ``accel_window`` (>= 5 time
     #: constants), which brings the spread over 4 / 2 / 1 ms to <= 5 % for designs that
-    #: do not bottom out (see sim.py).  At the default design the crush plateau
+    #: do not bottom out (see mujoco/sim.py).  At the default design the crush plateau
     #: (17.3 m/s^2), strokes and energies change by < 2 %; at extreme designs ``E_abs``
     #: does not (``alpha2`` = 50 deg: 2274 / 2504 / 2571 J), because the soft knee loops
     #: take a large share of the energy there (``energy["joint_loops"]`` in the metrics).
@@ -300,7 +300,7 @@ class LanderParams:
     #: constraint time constants, so that the touchdown kick of the unsprung masses
     #: (whose duration is the numerical constraint compliance) counts by its impulse,
     #: not its height; shorter than the shortest crush pulse in bounds (~55 ms).  See
-    #: sim.py for the measurements (5 ms before).
+    #: mujoco/sim.py for the measurements (5 ms before).
     accel_window: float = 0.020
     #: Weight ``alpha`` of the energy term of the objective [-].
     energy_weight: float = 2.0

@@ -1,12 +1,12 @@
 """The engine-independent half of a touchdown simulation: history, settling, metrics.
 
-:class:`Landing` is the base class of the MuJoCo lander (:class:`~.sim.LanderSim`) and
-the Chrono lander (:class:`~.chrono_sim.ChronoLanderSim`): each engine's class steps its
+:class:`Landing` is the base class of the MuJoCo lander (:class:`~.mujoco.sim.LanderSim`)
+and the Chrono lander (:class:`~.chrono.sim.ChronoLanderSim`): each engine's class steps its
 own physics and hands the chassis state to :meth:`Landing._record` once per tick; this
 class keeps the history, decides when the lander has settled (:meth:`Landing.run`) and
 computes the metrics both engines share -- ``a_max`` (the 20 ms box filter, see
-:mod:`~.sim`), ``J``, the absorbers' energy and strokes, tilt -- with the same code, so a
-cross-engine comparison compares physics, not bookkeeping.  Pure NumPy.
+:mod:`~.mujoco.sim`), ``J``, the absorbers' energy and strokes, tilt -- with the same code,
+so a cross-engine comparison compares physics, not bookkeeping.  Pure NumPy.
 """
 
 from __future__ import annotations
@@ -18,13 +18,13 @@ import numpy as np
 
 from chronogym.tasks.lander.absorber import HoneycombAbsorber
 from chronogym.tasks.lander.design import LanderDesign, LanderParams
-from chronogym.tasks.lander.model import N_LEGS
+from chronogym.tasks.lander.geometry import N_LEGS
 
 __all__ = ["Landing", "filtered_acceleration", "objective"]
 
 
 def objective(a_max: float, e_abs: float, params: LanderParams) -> float:
-    """``J = a_max / a_ref + (alpha (E_abs / E_init - 1))^2`` (see :mod:`~.sim`)."""
+    """``J = a_max / a_ref + (alpha (E_abs / E_init - 1))^2`` (see :mod:`~.mujoco.sim`)."""
     return a_max / params.a_ref + (params.energy_weight * (e_abs / params.e_init - 1.0)) ** 2
 
 
@@ -151,7 +151,7 @@ class Landing:
         return filtered_acceleration(self._vel[: self._n + 1], self._window, self._dt)
 
     def _landing_metrics(self) -> dict[str, Any]:
-        """The metrics every engine computes the same way (see :mod:`~.sim`)."""
+        """The metrics every engine computes the same way (see :mod:`~.mujoco.sim`)."""
         p = self.params
         ab = self.absorber
         acc = self.chassis_acceleration()

@@ -166,14 +166,10 @@ import numpy as np
 
 from chronogym.engines.mujoco import mujoco_diverged
 from chronogym.tasks.lander.design import DEFAULT_DESIGN, LanderDesign, LanderParams
+from chronogym.tasks.lander.geometry import N_LEGS
 from chronogym.tasks.lander.landing import Landing
-from chronogym.tasks.lander.model import (
-    N_LEGS,
-    LanderModelInfo,
-    Terrain,
-    build_lander_model,
-    terrain_params,
-)
+from chronogym.tasks.lander.mujoco.model import LanderModelInfo, build_lander_model
+from chronogym.tasks.lander.terrain import Terrain, terrain_params
 
 if TYPE_CHECKING:
     from chronogym.terrain import MujocoSoil

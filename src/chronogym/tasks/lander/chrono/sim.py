@@ -1,15 +1,15 @@
 """Touchdown simulation of the lander in Project Chrono (needs ``pychrono``).
 
-:class:`ChronoLanderSim` is :class:`~.sim.LanderSim` on the Chrono model of
-:mod:`.chrono_model`: same constructor, ``reset``, ``step``, ``run`` and metrics (the
-engine-independent ones computed by the same code, :class:`~.landing.Landing`).
+:class:`ChronoLanderSim` is :class:`~..mujoco.sim.LanderSim` on the Chrono model of
+:mod:`.model`: same constructor, ``reset``, ``step``, ``run`` and metrics (the
+engine-independent ones computed by the same code, :class:`~..landing.Landing`).
 Flat rigid ground only.
 
 One tick (:meth:`ChronoLanderSim.step`), as in MuJoCo: read the six strokes and stroke
 rates (the struts' ``ChLinkTSDA`` lengths, updated by Chrono at the end of the previous
 step), advance the honeycomb law once (:meth:`HoneycombAbsorber.update`), commit its
 forces and the slide stops' engagement for the struts' force functors
-(:mod:`.chrono_struts`), then ``DoStepDynamics``.  Chrono evaluates link forces in
+(:mod:`.struts`), then ``DoStepDynamics``.  Chrono evaluates link forces in
 ``Update``, which it runs at the end of a step -- with the *previous* tick's forces -- so
 the step is preceded by ``ForceUpdate()``: Chrono then updates again at the start of the
 step, after the new forces are committed (each functor is called twice per tick, the law
@@ -24,7 +24,7 @@ Energy balance (``metrics()["energy"]``, :meth:`ChronoLanderSim.energy_ledger`):
     rest = contact + residual
 
 * ``absorbers``: the honeycomb force (held over the tick) times the mid-tick stroke rate
-  ``(v_n + v_n+1) / 2``, as in MuJoCo's ledger (:mod:`~.sim`: with it the work and the
+  ``(v_n + v_n+1) / 2``, as in MuJoCo's ledger (:mod:`~..mujoco.sim`: with it the work and the
   kinetic energy agree over a velocity jump), split as there into ``absorbers_dissipated``
   (``E_abs``, the law's own account), ``absorbers_elastic`` and ``absorbers_coupling``;
 * ``joint_limits``: the same for the slide stops;
@@ -56,7 +56,7 @@ from chronogym.engines.chrono import (
     set_body_state,
     vec3,
 )
-from chronogym.tasks.lander.chrono_model import (
+from chronogym.tasks.lander.chrono.model import (
     ChronoLanderModel,
     ChronoSettings,
     build_chrono_lander,
@@ -65,7 +65,7 @@ from chronogym.tasks.lander.chrono_model import (
 )
 from chronogym.tasks.lander.design import DEFAULT_DESIGN, LanderDesign, LanderParams
 from chronogym.tasks.lander.landing import Landing
-from chronogym.tasks.lander.model import Terrain
+from chronogym.tasks.lander.terrain import Terrain
 
 __all__ = ["CHRONO_LEDGER_TERMS", "ChronoLanderSim", "simulate_chrono_landing"]
 

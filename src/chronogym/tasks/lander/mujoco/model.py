@@ -40,7 +40,8 @@ of the secondary struts, the light pads); the constraints' ``solref`` time const
 
 Leg layout: three pairs of legs centred on the azimuths 0, 120, 240 deg, the two legs
 of a pair ``+-beta/2`` about the pair's centre (``beta = 60 deg`` spaces all six
-evenly).
+evenly).  The points and frames come from :func:`~chronogym.tasks.lander.geometry.leg_geometry`,
+shared with the Chrono model.
 
 Collisions: only the pads and the chassis collide, and only with the terrain (pads and
 chassis have ``contype=1, conaffinity=0``, the terrain ``contype=0, conaffinity=1``;
@@ -53,29 +54,28 @@ ranges or gains to keep consistent with the crush law, and ``ctrl`` stays free f
 later controller.
 
 The model enables ``mjENBL_ENERGY`` (``data.energy`` = potential and kinetic energy,
-computed at the start of every step) for the energy ledger of ``LanderSim`` (sim.py);
+computed at the start of every step) for the energy ledger of ``LanderSim`` (:mod:`.sim`);
 contacts use the elliptic friction cone, whose constraint rows split into one normal row
 and two friction rows, which the ledger books apart.
 
-Terrain (:class:`Terrain`): an infinite rigid plane, optionally inclined by ``slope``
-(downhill towards world +x), with optional rocks (spheres and boxes, partly buried,
-placed by a seeded generator over the ring where the pads land).  Rocks are static
-geoms of the world body, so the body count stays 25 whatever the terrain.  (No
-heightfield: slope and rocks cover the cases the study needs.)
+Terrain (:class:`~chronogym.tasks.lander.terrain.Terrain`): an infinite rigid plane,
+optionally inclined by ``slope`` (downhill towards world +x), with optional rocks (spheres
+and boxes, partly buried, placed by a seeded generator over the ring where the pads land).
+Rocks are static geoms of the world body, so the body count stays 25 whatever the terrain.
+(No heightfield: slope and rocks cover the cases the study needs.)
 
 Soil (``Terrain.soil``): a level patch of SCM soil (``chronogym.terrain.MujocoSoil``) at
 the plane's height, under the pads and the chassis.  The model is the same (the plane
 stays, as a picture); ``LanderSim`` builds the soil on the compiled model and stops the
 plane's contacts with the pads and the chassis, so only the soil holds them (rocks still
-do).  On soil the time step is ``LanderParams.soil_timestep`` (see :func:`terrain_params`).
+do).  On soil the time step is ``LanderParams.soil_timestep`` (see
+:func:`~chronogym.tasks.lander.terrain.terrain_params`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -86,101 +86,13 @@ from chronogym.tasks.lander.design import (
     LanderDesign,
     LanderParams,
 )
+from chronogym.tasks.lander.geometry import N_LEGS, leg_geometry, quat_from_axes
+from chronogym.tasks.lander.terrain import Terrain, terrain_params
 
-if TYPE_CHECKING:
-    from chronogym.terrain.params import SoilParameters
-
-__all__ = [
-    "N_LEGS",
-    "LanderModelInfo",
-    "Terrain",
-    "build_lander_model",
-    "build_lander_spec",
-    "leg_azimuths",
-    "leg_geometry",
-    "quat_from_axes",
-    "terrain_params",
-]
-
-#: Number of legs.
-N_LEGS = 6
+__all__ = ["LanderModelInfo", "build_lander_model", "build_lander_spec"]
 
 _LANDER_CONTYPE = 1  # pads and chassis
 _TERRAIN_CONAFFINITY = 1
-
-
-@dataclass(frozen=True)
-class Terrain:
-    """Ground under the lander.
-
-    Attributes:
-        slope: inclination of the ground plane [rad], downhill towards world +x
-            (0: flat).  Must be in [0, 20 deg] (landing-site slope requirements are
-            typically <= 15 deg).
-        n_rocks: number of rocks (0: none).  Rocks are spheres and boxes, partly buried
-            (top 1.2 sizes above the plane), scattered by the landing's ``seed``
-            uniformly over the ring where pads can land for any design in
-            :data:`DESIGN_BOUNDS` (0.3 m inside the innermost to 0.3 m outside the
-            outermost pad position), so the same seed gives the same terrain for every
-            design.
-        rock_size: (min, max) rock radius / box half-size [m].
-        soil: ``None`` (rigid ground) or the SCM soil under the pads and the chassis: a
-            preset name of ``chronogym.terrain.SOIL_PRESETS`` or a ``SoilParameters``.
-            Level ground only (``slope`` 0); rocks stay rigid.
-        soil_extent: side of the square soil patch centred under the lander [m].  The
-            pads land at most 2.78 m from the axis (pad rim, ``alpha2`` = 50 deg); 7 m
-            leaves 0.7 m for sliding or a horizontal touchdown speed.
-        soil_resolution: soil grid spacing [m].  On ``"mars"`` soil the default design's
-            sinkage, ``E_abs`` and ``a_max`` change by < 0.5 % from 2 cm to 1 cm (1.6 %
-            at 3 cm); 2 cm puts about 180 nodes under each 0.3 m pad.
-    """
-
-    slope: float = 0.0
-    n_rocks: int = 0
-    rock_size: tuple[float, float] = (0.05, 0.15)
-    soil: SoilParameters | str | None = None
-    soil_extent: float = 7.0
-    soil_resolution: float = 0.02
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.slope <= math.radians(20.0):
-            raise ValueError(f"slope={self.slope!r} rad must be in [0, {math.radians(20):.4f}]")
-        if self.soil is not None:
-            self._check_soil()
-        if self.n_rocks < 0:
-            raise ValueError(f"n_rocks={self.n_rocks!r} must be >= 0")
-        lo, hi = self.rock_size
-        if not 0 < lo <= hi:
-            raise ValueError(f"rock_size={self.rock_size!r} must satisfy 0 < min <= max")
-
-    def _check_soil(self) -> None:
-        """Validate the soil fields: preset name or parameters, level ground, grid size."""
-        from chronogym.terrain.params import SoilParameters, soil_preset
-
-        if isinstance(self.soil, str):
-            soil_preset(self.soil)  # raises naming the preset and the valid names
-        elif not isinstance(self.soil, SoilParameters):
-            raise ValueError(
-                f"soil={self.soil!r}: expected None, a soil preset name or a SoilParameters"
-            )
-        if self.slope != 0.0:
-            raise ValueError(
-                f"slope={self.slope!r} with soil={self.soil!r}: expected slope=0 (the soil "
-                "patch is level)"
-            )
-        for name in ("soil_extent", "soil_resolution"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not 0.0 < value < math.inf:
-                raise ValueError(f"{name}={value!r}: expected a finite number > 0 (m)")
-        if self.soil_resolution > self.soil_extent / 10:
-            raise ValueError(
-                f"soil_resolution={self.soil_resolution!r}: expected at most soil_extent / 10 "
-                f"= {self.soil_extent / 10:g} m"
-            )
-
-    def plane_height(self, x: np.ndarray | float) -> np.ndarray | float:
-        """Height of the (inclined) plane at world ``x`` [m]."""
-        return -math.tan(self.slope) * np.asarray(x)
 
 
 @dataclass
@@ -200,81 +112,6 @@ class LanderModelInfo:
     azimuths: np.ndarray  # leg azimuths [rad]
     start_height: float  # initial chassis centre height [m]
     rocks: list[dict] = field(default_factory=list)
-
-
-def terrain_params(params: LanderParams, terrain: Terrain) -> LanderParams:
-    """``params`` with the time step ``terrain`` needs: ``min(timestep, soil_timestep)`` on
-    soil (see ``LanderParams.soil_timestep``), unchanged on rigid ground."""
-    if terrain.soil is None or params.timestep <= params.soil_timestep:
-        return params
-    return dataclasses.replace(params, timestep=params.soil_timestep)
-
-
-def leg_azimuths(beta: float) -> np.ndarray:
-    """Azimuths of the six legs [rad]: three pairs at 0/120/240 deg, +-beta/2 each."""
-    centres = np.radians([0.0, 120.0, 240.0])
-    return np.concatenate([[c - beta / 2, c + beta / 2] for c in centres])
-
-
-def quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Quaternion (w, x, y, z) of the rotation whose columns are the unit vectors x, y, z."""
-    mat = np.column_stack([x, y, z]).reshape(-1)
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, mat)
-    return quat
-
-
-def _frame_with_z(z: np.ndarray) -> np.ndarray:
-    """Quaternion of some frame whose z axis is ``z`` (unit)."""
-    helper = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return quat_from_axes(x, y, z)
-
-
-def leg_geometry(design: LanderDesign, p: LanderParams) -> list[dict]:
-    """Per-leg points and frames in the chassis frame (origin at the chassis centre, z up).
-
-    One dict per leg (order of :func:`leg_azimuths`): ``phi`` (azimuth), the points ``A``
-    (hinge), ``B`` (secondary-strut root), ``K`` (knee) and ``P`` (pad ball joint at zero
-    stroke), ``strut_rot`` (columns: x tangential = hinge axis, y in the radial plane, z
-    along the strut pointing up = slide axis, + is compression) and its quaternion
-    ``strut_quat`` (w, x, y, z), the secondary strut's frame ``sec_quat`` (z from B to K)
-    and length ``sec_len``.  Pure geometry: every engine's builder uses it.
-    """
-    bottom = -p.chassis_length / 2.0
-    legs = []
-    for phi in leg_azimuths(design.beta):
-        e_r = np.array([math.cos(phi), math.sin(phi), 0.0])
-        e_t = np.array([-math.sin(phi), math.cos(phi), 0.0])
-        e_z = np.array([0.0, 0.0, 1.0])
-        down = math.sin(design.alpha2) * e_r - math.cos(design.alpha2) * e_z
-        up = -down
-        a = p.hinge_radius * e_r + (bottom + p.hinge_height) * e_z
-        b = p.secondary_root_radius * e_r + bottom * e_z
-        k = a + p.knee_distance * down
-        pad_joint = a + p.primary_length * down
-        # strut frame: z along the strut pointing up (slide axis: + = compression),
-        # x tangential (hinge axis), y = z cross x (in the radial plane).
-        x_l, z_l = e_t, up
-        y_l = np.cross(z_l, x_l)
-        rot = np.column_stack([x_l, y_l, z_l])
-        bk = k - b
-        legs.append(
-            {
-                "phi": phi,
-                "A": a,
-                "B": b,
-                "K": k,
-                "P": pad_joint,
-                "strut_quat": quat_from_axes(x_l, y_l, z_l),
-                "strut_rot": rot,
-                "sec_quat": _frame_with_z(bk / np.linalg.norm(bk)),
-                "sec_len": float(np.linalg.norm(bk)),
-            }
-        )
-    return legs
 
 
 def _pad_bottom_offset(p: LanderParams) -> float:

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from chronogym.tasks.lander.design import LanderParams
-from chronogym.tasks.lander.model import N_LEGS
+from chronogym.tasks.lander.geometry import N_LEGS
 
 __all__ = ["StrutForces", "stop_coefficients", "stop_engagement"]
 

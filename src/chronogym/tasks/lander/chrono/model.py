@@ -1,7 +1,7 @@
 """Project Chrono model of the six-legged lander (PyChrono 10 API; needs ``pychrono``).
 
-The same 25 bodies, joints and geometry as the MuJoCo model (:mod:`.model`), built as a
-``ChSystemSMC``:
+The same 25 bodies, joints and geometry as the MuJoCo model (:mod:`..mujoco.model`), built
+as a ``ChSystemSMC``:
 
 * **Bodies.**  Mass, inertia and the touchdown pose of every body are read from the
   compiled MuJoCo model of the same design (``build_lander_model`` at ``qpos0``): each
@@ -10,7 +10,7 @@ The same 25 bodies, joints and geometry as the MuJoCo model (:mod:`.model`), bui
   cylinder inertias from the geoms); the armature of MuJoCo's ball joints (0.01 kg m^2)
   is added to the pads' and secondary struts' inertia.  MuJoCo's joint damping (1-2
   N m s/rad on the hinges and balls, 2 J of a landing) is left out.  Joint anchors and
-  axes come from :func:`.model.leg_geometry`.
+  axes come from :func:`..geometry.leg_geometry`.
 * **Joints** (``ChLinkLock*``, bilateral): per leg a revolute hinge chassis-upper at
   ``A`` (axis tangential), a prismatic slide upper-lower along the strut (the stroke), a
   spherical pad joint at ``P``, and the secondary strut on two spherical joints, at its
@@ -21,7 +21,7 @@ The same 25 bodies, joints and geometry as the MuJoCo model (:mod:`.model`), bui
   piston (length ``primary_length - stroke``; positive force opens the strut), whose
   Python ``ForceFunctor`` applies the honeycomb force of :class:`HoneycombAbsorber`
   (committed once per tick by ``ChronoLanderSim``) and the slide stops at 0 and
-  ``max_stroke + stop_margin``: see :mod:`.chrono_struts`.
+  ``max_stroke + stop_margin``: see :mod:`.struts`.
 * **Contact**: the pads and the chassis against a fixed ground box (Bullet collision),
   smooth contact (SMC, Hooke law with explicit coefficients); see :class:`ChronoSettings`
   for why and for the values.  Friction ``params.friction``.
@@ -40,15 +40,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from chronogym.tasks.lander.chrono_struts import StrutForces, stop_coefficients
+from chronogym.tasks.lander.chrono.struts import StrutForces, stop_coefficients
 from chronogym.tasks.lander.design import LanderDesign, LanderParams
-from chronogym.tasks.lander.model import (
-    N_LEGS,
-    Terrain,
-    build_lander_model,
-    leg_geometry,
-    quat_from_axes,
-)
+from chronogym.tasks.lander.geometry import N_LEGS, leg_geometry, quat_from_axes
+from chronogym.tasks.lander.mujoco.model import build_lander_model
+from chronogym.tasks.lander.terrain import Terrain
 
 __all__ = [
     "CHRONO_TERRAIN",
@@ -111,7 +107,7 @@ class ChronoSettings:
             at ``alpha2`` = 50 deg and 0.5 ms.
         stop_time_constant: time constant of the slide stops [s] (``None``:
             ``params.constraint_timeconst``, as MuJoCo's soft joint limit; see
-            :mod:`.chrono_struts`).
+            :mod:`.struts`).
         pad_points, pad_point_radius: contact spheres per pad and their radius [m].
         pad_ring: radius of their ring over the pad radius.
         envelope: Bullet's collision envelope [m] (contacts are found this far out; SMC
@@ -376,6 +372,6 @@ def _leg_links(
         ball = chrono.ChLinkLockSpherical()
         ball.Initialize(body_1, body_2, _frame(chrono, point, identity))
         links.append(ball)
-    strut = chrono.ChLinkTSDA()  # force: chrono_struts.StrutForces
+    strut = chrono.ChLinkTSDA()  # force: struts.StrutForces
     strut.Initialize(upper, lower, False, _vec(chrono, a), _vec(chrono, p))
     return [*links, strut]
