@@ -123,9 +123,9 @@ def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
         parts.append(view[at : at + size])
         at += size
     if status == FAILED:
-        failure = pickle.loads(parts[4])  # trusted: our own worker, over a private socket
+        failure = pickle.loads(parts[4])  # trusted: own worker (a private socket)
         return error_outcome(failure.error, failure.text)
-    extra = pickle.loads(parts[4]) if sizes[4] else (None, None)  # trusted, as above
+    extra = pickle.loads(parts[4]) if sizes[4] else (None, None)  # trusted: own worker
     return Outcome(True, (*(bytes(p) for p in parts[:4]), *extra))
 
 
