@@ -1,0 +1,152 @@
+"""Vector-env throughput of two git revisions of chronogym, side by side in one run.
+
+Each revision's ``src/`` is checked out into a temporary folder (``git worktree``)
+and measured in its own subprocess (``PYTHONPATH`` = that ``src``, its own local
+Ray), the revisions alternating round by round so that machine noise falls on
+both. A regression check for refactors of ``vector/``:
+
+    python benchmarks/compare_revisions.py --base 305a016 [--head HEAD] [--rounds 3]
+
+Prints a table (median env-steps/s per shape, head / base ratio) and writes JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from common import RESULTS, header, write_json
+
+REPO = Path(__file__).resolve().parents[1]
+OUT = RESULTS / "compare_revisions.json"
+
+#: (label, env id, env kwargs, num_envs, backend, vector kwargs)
+SHAPES = [
+    ("cartpole serial 16", "chronogym/CartPole-v0", {"k": 1}, 16, "serial", {}),
+    ("cartpole ray-sock 2x8", "chronogym/CartPole-v0", {"k": 1}, 16, "ray", {"envs_per_worker": 8}),
+    ("cartpole ray-actor 2x8", "chronogym/CartPole-v0", {"k": 1}, 16, "ray",
+     {"envs_per_worker": 8, "transport": "actor"}),
+    ("go1 serial 16", "chronogym/Go1Velocity-v0", {}, 16, "serial", {}),
+    ("go1 ray-sock 2x8", "chronogym/Go1Velocity-v0", {}, 16, "ray", {"envs_per_worker": 8}),
+]  # fmt: skip
+
+# Runs inside the subprocess: step one shape with random actions, print env-steps/s as JSON.
+MEASURE = r"""
+import json, sys, time
+import numpy as np
+import chronogym
+env_id, env_kwargs, n, backend, vec_kwargs, seconds = json.loads(sys.argv[1])
+if backend == "ray":
+    import ray
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+vec = chronogym.make_vec(env_id, n, backend=backend, env_kwargs=env_kwargs, **vec_kwargs)
+vec.reset(seed=0)
+space = vec.action_space
+space.seed(0)
+actions = [space.sample() for _ in range(64)]
+for a in actions[:20]:
+    vec.step(a)
+steps, start = 0, time.perf_counter()
+while time.perf_counter() - start < seconds:
+    vec.step(actions[steps % 64])
+    steps += 1
+rate = steps * n / (time.perf_counter() - start)
+vec.close()
+print(json.dumps({"rate": rate, "module": chronogym.__file__}))
+"""
+
+
+def checkout(rev: str, into: Path) -> Path:
+    """``rev``'s tree in ``into`` (a detached worktree); its ``src`` folder."""
+    subprocess.run(
+        ["git", "-C", str(REPO), "worktree", "add", "--detach", str(into), rev],
+        check=True,
+        capture_output=True,
+    )
+    return into / "src"
+
+
+def measure(src: Path, shape: tuple, seconds: float) -> dict:
+    _, env_id, env_kwargs, n, backend, vec_kwargs = shape
+    arg = json.dumps([env_id, env_kwargs, n, backend, vec_kwargs, seconds])
+    done = subprocess.run(
+        [sys.executable, "-c", MEASURE, arg],
+        env={"PYTHONPATH": str(src), "PATH": "/usr/bin:/bin", "HOME": str(Path.home())},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    if not result["module"].startswith(str(src)):
+        raise RuntimeError(f"measured {result['module']}, not the checkout at {src}")
+    return result
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--base", required=True, help="the revision to compare against")
+    parser.add_argument("--head", default="HEAD", help="the revision under test")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--seconds", type=float, default=4.0, help="stepping time per sample")
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args(argv)
+    if args.rounds < 1 or args.seconds <= 0:
+        parser.error(f"--rounds={args.rounds} / --seconds={args.seconds}: expected >= 1 / > 0")
+    revs = {name: rev for name, rev in (("base", args.base), ("head", args.head))}
+    rates: dict[str, dict[str, list[float]]] = {s[0]: {"base": [], "head": []} for s in SHAPES}
+    with tempfile.TemporaryDirectory(prefix="chronogym-revs-") as tmp:
+        srcs = {name: checkout(rev, Path(tmp) / name) for name, rev in revs.items()}
+        try:
+            for r in range(args.rounds):
+                for shape in SHAPES:
+                    order = ("base", "head") if r % 2 == 0 else ("head", "base")
+                    for name in order:
+                        rates[shape[0]][name].append(
+                            measure(srcs[name], shape, args.seconds)["rate"]
+                        )
+                    print(f"round {r + 1}/{args.rounds} {shape[0]}: "
+                          f"base {rates[shape[0]]['base'][-1]:,.0f} "
+                          f"head {rates[shape[0]]['head'][-1]:,.0f}", flush=True)  # fmt: skip
+        finally:
+            for name in srcs:
+                subprocess.run(
+                    [
+                        "git",
+                        "-C",
+                        str(REPO),
+                        "worktree",
+                        "remove",
+                        "--force",
+                        str(Path(tmp) / name),
+                    ],
+                    capture_output=True,
+                )
+    rows = []
+    print(f"\n{'shape':<26}{'base':>12}{'head':>12}{'head/base':>11}")
+    for label, per in rates.items():
+        base, head = statistics.median(per["base"]), statistics.median(per["head"])
+        rows.append({"shape": label, "base": base, "head": head, "ratio": head / base, **per})
+        print(f"{label:<26}{base:>12,.0f}{head:>12,.0f}{head / base:>11.2f}")
+    commits = {
+        name: subprocess.run(
+            ["git", "-C", str(REPO), "rev-parse", rev], capture_output=True, text=True
+        ).stdout.strip()
+        for name, rev in revs.items()
+    }
+    record = {
+        **header("compare_revisions"),
+        "revisions": commits,
+        "rounds": args.rounds,
+        "seconds": args.seconds,
+        "rows": rows,
+    }
+    write_json(args.out, record, note=f" (env-steps/s, medians of {args.rounds} rounds)")
+
+
+if __name__ == "__main__":
+    main()
