@@ -10,6 +10,7 @@ Prints an aligned table and writes JSON (default ``benchmarks/results/throughput
     python benchmarks/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
     python benchmarks/throughput.py --transports actor socket   # several RayVectorEnv transports
     python benchmarks/throughput.py --breakdown   # one vector step split into phases (µs)
+    python benchmarks/throughput.py --background-load   # Ray worker priority beside a busy process
 
 Counting: the cart-pole runs with ``terminate=False`` (the pole may fall; episodes end
 only by truncation after 500 steps), so every env step costs the same physics and no
@@ -36,6 +37,10 @@ The transports are ``socket`` (rows ``ray-sock``, RayVectorEnv's default) and ``
 (``ray``); the ``compiled`` transport (Ray Compiled Graphs, ``ray-cg``) was removed from
 chronogym.
 
+``--background-load`` replaces the sweep by 16 Go1 envs with Ray workers at nice 0
+(chronogym's default) and at Ray's nice 15, and serially, quiet and beside one busy process
+(``throughput_priority.py``).
+
 This file is the command line; the work is done by ``throughput_timing.py`` (the timed loops),
 ``throughput_sweep.py`` (the configurations), ``throughput_report.py`` (ratios, efficiency,
 goals, tables) and ``throughput_breakdown.py`` (``--breakdown``); ``common.py`` holds what every
@@ -49,14 +54,16 @@ import sys
 import time
 from pathlib import Path
 
-from common import RESULTS, usable_cpus, write_json
+from common import RESULTS, header, usable_cpus, write_json
 from throughput_breakdown import breakdown_record, run_breakdown
+from throughput_priority import format_priority, run_priority
 from throughput_report import derive, format_table, goal_table, notes, sweep_record
 from throughput_sweep import run_sweep
 from throughput_timing import DEFAULT_TRANSPORT, TRANSPORT_BACKENDS, measure_tick_us, start_ray
 
 DEFAULT_OUT = RESULTS / "throughput.json"
 BREAKDOWN_OUT = DEFAULT_OUT.with_name("throughput_breakdown.json")
+PRIORITY_OUT = DEFAULT_OUT.with_name("throughput_priority.json")
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -124,9 +131,21 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help=f"JSON output (default {DEFAULT_OUT.name}; --breakdown: {BREAKDOWN_OUT.name})",
     )
+    parser.add_argument(
+        "--background-load",
+        action="store_true",
+        help="Ray workers at nice 0 vs 15 (and serial), quiet and beside a busy process",
+    )
+    parser.add_argument("--rounds", type=int, default=2, help="--background-load: rounds")
     args = parser.parse_args(argv)
     if args.out is None:
-        args.out = BREAKDOWN_OUT if args.breakdown else DEFAULT_OUT
+        args.out = (
+            PRIORITY_OUT
+            if args.background_load
+            else BREAKDOWN_OUT
+            if args.breakdown
+            else DEFAULT_OUT
+        )
     if args.transports is None and not args.breakdown:
         args.transports = [DEFAULT_TRANSPORT]
     if args.quick:
@@ -141,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the sweep (or the breakdown), print the tables, write the JSON."""
     args = parse_args(argv)
     wall = time.perf_counter()
+    if args.background_load:
+        return main_priority(args, wall)
     tick_us = measure_tick_us(max(args.seconds, 0.3), args.seed)
     if args.breakdown:
         return main_breakdown(args, tick_us, wall)
@@ -159,6 +180,17 @@ def main(argv: list[str] | None = None) -> int:
         sweep_record(args, tick_us, results),
         f" ({time.perf_counter() - wall:.0f} s in all)",
     )
+    return 0
+
+
+def main_priority(args: argparse.Namespace, wall: float) -> int:
+    """The --background-load mode: worker priority beside a busy process, and its JSON."""
+    seconds = max(args.seconds, 3.0)
+    rows = run_priority(seconds, args.rounds)
+    print()
+    print(format_priority(rows))
+    record = {**header("throughput_priority"), "seconds": seconds, "rounds": args.rounds}
+    write_json(args.out, {**record, "rows": rows}, f" ({time.perf_counter() - wall:.0f} s)")
     return 0
 
 

@@ -49,42 +49,78 @@ def run_episodes(vec, steps: int, seed: int, noise: float, progress: bool) -> di
     }
 
 
-def cmd_demo(args: argparse.Namespace) -> int:
-    """Run the cart-pole on Ray workers and check the numbers against a serial run."""
+CONTROL_PERIOD_S = 0.02  # the demo cart-pole's decision period (50 Hz) at any tick count
+
+
+def compare_backends(args: argparse.Namespace, ticks: int, steps: int, progress: bool) -> tuple:
+    """The demo workload (cart-poles at ``ticks`` physics ticks per step) on Ray and serially:
+    (Ray stats, serial stats, workers, envs per worker, CPUs per worker, start-up seconds)."""
     from chronogym import RayVectorEnv, SerialVectorEnv
 
-    print(
-        f"chronogym demo: {args.num_envs} x {DEMO_ENV} on Ray "
-        f"({args.steps} vector steps, seed {args.seed})"
-    )
+    env_kwargs = {"k": ticks, "dt": CONTROL_PERIOD_S / ticks}
     started = time.perf_counter()
     vec = RayVectorEnv(
-        DEMO_ENV, args.num_envs, envs_per_worker=args.envs_per_worker, address=args.address
+        DEMO_ENV,
+        args.num_envs,
+        envs_per_worker=args.envs_per_worker,
+        address=args.address,
+        env_kwargs=env_kwargs,
     )
-    print(
-        f"  {vec.num_workers} Ray workers x {vec.envs_per_worker} envs each, "
-        f"{vec.num_cpus_per_worker:g} CPU per worker (ready in "
-        f"{time.perf_counter() - started:.1f} s)"
-    )
+    layout = (vec.num_workers, vec.envs_per_worker, vec.num_cpus_per_worker)
+    ready = time.perf_counter() - started
     try:
-        ray_stats = run_episodes(vec, args.steps, args.seed, args.noise, progress=True)
+        ray_stats = run_episodes(vec, steps, args.seed, args.noise, progress=progress)
     finally:
         vec.close()
-    serial = SerialVectorEnv(DEMO_ENV, args.num_envs)
-    serial_stats = run_episodes(serial, args.steps, args.seed, args.noise, progress=False)
-    serial.close()
+    serial = SerialVectorEnv(DEMO_ENV, args.num_envs, env_kwargs=env_kwargs)
+    try:
+        serial_stats = run_episodes(serial, steps, args.seed, args.noise, progress=False)
+    finally:
+        serial.close()
+    return ray_stats, serial_stats, *layout, ready
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Run the cart-pole on Ray workers and check the numbers against a serial run."""
+    for flag, value, least in (("ticks", args.ticks, 1), ("cheap-ticks", args.cheap_ticks, 0)):
+        if value < least:
+            raise SystemExit(f"--{flag}={value}: expected an integer >= {least}")
+    print(
+        f"chronogym demo: {args.num_envs} x {DEMO_ENV} on Ray, {args.ticks} physics ticks "
+        f"per step ({args.steps} vector steps, seed {args.seed})"
+    )
+    ray_stats, serial_stats, workers, per_worker, cpus, ready = compare_backends(
+        args, args.ticks, args.steps, progress=True
+    )
+    print(
+        f"  {workers} Ray workers x {per_worker} envs each, {cpus:g} CPU per worker "
+        f"(ready in {ready:.1f} s)"
+    )
     identical = ray_stats["trajectory_sha256"] == serial_stats["trajectory_sha256"]
     print(
         f"  episodes finished : {ray_stats['episodes']} "
         f"(mean return {ray_stats['mean_return']:.1f} of 500)"
     )
-    print(f"  Ray throughput    : {ray_stats['env_steps_per_s']:,.0f} env-steps/s")
-    print(f"  serial throughput : {serial_stats['env_steps_per_s']:,.0f} env-steps/s")
+    ray_rate, serial_rate = ray_stats["env_steps_per_s"], serial_stats["env_steps_per_s"]
+    print(f"  Ray throughput    : {ray_rate:,.0f} env-steps/s ({ray_rate / serial_rate:.2f}x)")
+    print(f"  serial throughput : {serial_rate:,.0f} env-steps/s")
     verdict = "bit-identical" if identical else "DIFFERENT"
     print(
         f"  Ray vs serial     : {verdict} trajectories "
         f"(sha256 {ray_stats['trajectory_sha256'][:16]}...)"
     )
+    if args.cheap_ticks:
+        cheap_ray, cheap_serial, *_ = compare_backends(
+            args, args.cheap_ticks, args.steps, progress=False
+        )
+        ratio = cheap_ray["env_steps_per_s"] / cheap_serial["env_steps_per_s"]
+        side = "slower" if ratio < 1 else "faster"
+        print(
+            f"  cheap steps ({args.cheap_ticks} ticks, "
+            f"{1e6 / cheap_serial['env_steps_per_s']:.0f} us each): Ray is {side} than "
+            f"one process ({ratio:.2f}x): a remote step costs more than the physics it runs"
+            + ("" if ratio < 1 else "; here it still paid")
+        )
     return 0 if identical else 1
 
 
@@ -185,6 +221,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise SystemExit(f"--minutes={args.minutes}: expected a number > 0")
     if args.torch_threads < 1:
         raise SystemExit(f"--torch-threads={args.torch_threads}: expected an integer >= 1")
+    if args.policy_lag not in (0, 1):
+        raise SystemExit(
+            f"--policy-lag={args.policy_lag}: expected 0 (synchronous PPO) or 1 (update "
+            "overlapped with the next rollout)"
+        )
     if args.resume is not None and not os.path.isfile(args.resume):
         raise SystemExit(f"--resume={args.resume}: no such checkpoint file")
     print(
@@ -205,6 +246,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         envs_per_worker=args.envs_per_worker,
         address=args.address,
         torch_threads=args.torch_threads,
+        policy_lag=args.policy_lag,
     )
     row = result.last_row
     print(
@@ -277,6 +319,15 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--num-envs", type=int, default=8)
     demo.add_argument("--envs-per-worker", type=int, default=None)
     demo.add_argument("--steps", type=int, default=1000)
+    demo.add_argument(
+        "--ticks", type=int, default=200, help="physics ticks per env step (20 ms of control)"
+    )
+    demo.add_argument(
+        "--cheap-ticks",
+        type=int,
+        default=10,
+        help="also time a cheap workload with this many ticks per step (0: skip)",
+    )
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--noise", type=float, default=1.5, help="policy noise std")
     demo.add_argument("--address", default=None, help="Ray cluster address (default: local)")
@@ -304,7 +355,7 @@ def build_parser() -> argparse.ArgumentParser:
     opt.set_defaults(func=cmd_optimize)
     tr = sub.add_parser("train", help="train a policy with PPO (RSL-RL) on parallel envs")
     tr.add_argument("problem", choices=["quadruped"])
-    tr.add_argument("--num-envs", type=int, default=16)
+    tr.add_argument("--num-envs", type=int, default=32)
     tr.add_argument("--backend", default="ray", choices=["ray", "serial"])
     tr.add_argument("--iterations", type=int, default=None, help="PPO iterations to run")
     tr.add_argument("--minutes", type=float, default=None, help="wall-clock budget")
@@ -316,6 +367,13 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--envs-per-worker", type=int, default=None)
     tr.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (learner)")
     tr.add_argument("--address", default=None, help="Ray cluster address (default: local)")
+    tr.add_argument(
+        "--policy-lag",
+        type=int,
+        default=1,
+        help="1 (default): run each PPO update while the next rollout is collected, one "
+        "update stale; 0: synchronous PPO",
+    )
     tr.set_defaults(func=cmd_train)
     play = sub.add_parser("play", help="roll out a trained policy, print errors, save a video")
     play.add_argument("problem", choices=["quadruped"])

@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
+
 #: Ports each node needs besides the head's GCS port; all are picked free on loopback.
 NODE_PORT_FLAGS = (
     "--node-manager-port",
@@ -251,7 +253,7 @@ class LocalCluster:
         else:
             args += [f"--address={self.address}", "--include-log-monitor=false"]
         log_path = self.temp_dir / f"{name}.log"
-        env = {**os.environ, **self.env()}
+        env = {**os.environ, **self.env(), **worker_niceness_env(WORKER_NICENESS)}
         env.pop("RAY_ADDRESS", None)
         with log_path.open("wb") as log:
             process = subprocess.Popen(

@@ -35,14 +35,48 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
         ) from None
 
 
-def ensure_ray(address: str | None = None) -> None:
+#: Nice value of the worker processes of a Ray cluster that chronogym starts. Ray's own
+#: default (``RAY_worker_niceness``) is 15: its workers then lose their cores to any busy
+#: process of normal priority, the driver included (README "Worker priority").
+WORKER_NICENESS = 0
+
+
+def check_worker_niceness(worker_niceness: int | None) -> int | None:
+    """``worker_niceness`` validated: None (Ray's default, 15) or an integer in -20..19."""
+    if worker_niceness is None:
+        return None
+    if (
+        isinstance(worker_niceness, bool)
+        or not isinstance(worker_niceness, int)
+        or not -20 <= worker_niceness <= 19
+    ):
+        raise ValueError(
+            f"worker_niceness={worker_niceness!r}: expected an integer nice value in -20..19 "
+            "(0: the driver's priority) or None for Ray's default (15)"
+        )
+    return worker_niceness
+
+
+def worker_niceness_env(worker_niceness: int | None) -> dict[str, str]:
+    """Environment for Ray daemons so that they start workers at ``worker_niceness``
+    (nothing for None, and nothing when ``RAY_worker_niceness`` is already set)."""
+    if worker_niceness is None or "RAY_worker_niceness" in os.environ:
+        return {}
+    return {"RAY_worker_niceness": str(worker_niceness)}
+
+
+def ensure_ray(address: str | None = None, worker_niceness: int | None = WORKER_NICENESS) -> None:
     """Connect to the cluster at ``address`` (or ``RAY_ADDRESS``), else start a local one.
 
-    A local cluster is started without the dashboard. Does nothing when Ray is
-    already initialized in this process.
+    A local cluster is started without the dashboard, its workers at nice
+    ``worker_niceness`` (default 0, the driver's priority; None: Ray's default 15;
+    an explicit ``RAY_worker_niceness`` in the environment wins). A cluster that is
+    joined keeps the priority it was started with. Does nothing when Ray is already
+    initialized in this process.
     """
     import ray
 
+    check_worker_niceness(worker_niceness)
     if address:
         _check_reachable(address)
     if ray.is_initialized():
@@ -51,8 +85,14 @@ def ensure_ray(address: str | None = None) -> None:
     if address:
         _check_reachable(address)
         ray.init(address=address, log_to_driver=True)
-    else:
+        return
+    extra = worker_niceness_env(worker_niceness)
+    os.environ.update(extra)  # read by the raylet that ray.init starts
+    try:
         ray.init(include_dashboard=False, log_to_driver=True)
+    finally:
+        for key in extra:
+            os.environ.pop(key, None)
 
 
 #: Seconds to wait before each new try of a replacement worker that died before it was ready.

@@ -92,14 +92,16 @@ def test_play_writes_a_video(tmp_path):
     assert strip.shape[:2] == (height, 4 * width)  # the 4 frames side by side
 
 
-def test_train_on_ray_workers(tmp_path):
+def test_train_defaults_to_ray_workers_with_overlapped_updates(tmp_path):
     result = run_cli(
-        "train", "quadruped", "--num-envs", "2", "--backend", "ray", "--iterations", "2",
-        "--out", str(tmp_path),
+        "train", "quadruped", "--num-envs", "2", "--iterations", "3", "--out", str(tmp_path),
     )  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
-    assert iterations(tmp_path) == [0, 1]
+    assert iterations(tmp_path) == [0, 1, 2]
     assert "on the ray backend" in result.stdout
+    with (tmp_path / "progress.csv").open() as handle:
+        lags = [int(row["policy_lag"]) for row in csv.DictReader(handle)]
+    assert lags == [0, 1, 1]  # the default overlaps each update with the next rollout
 
 
 @pytest.mark.parametrize(
@@ -109,6 +111,8 @@ def test_train_on_ray_workers(tmp_path):
         ([], "give --iterations I, --minutes M, or both"),
         (["--minutes", "1", "--num-envs", "0"], "--num-envs=0: expected an integer >= 1"),
         (["--minutes", "1", "--resume", "missing.pt"], "--resume=missing.pt: no such checkpoint"),
+        (["--minutes", "1", "--policy-lag", "-1"], "--policy-lag=-1: expected 0 (synchronous"),
+        (["--minutes", "1", "--backend", "bogus"], "argument --backend: invalid choice: 'bogus'"),
     ],
 )
 def test_train_rejects_bad_input(args, message, tmp_path):

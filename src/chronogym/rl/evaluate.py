@@ -217,3 +217,60 @@ def format_summary(rows: Sequence[dict[str, Any]]) -> str:
             f"{row['y_vel_mse']:7.4f} {row['mean_vx']:7.3f} {row['mean_vy']:7.3f}"
         )
     return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class WalkingCriterion:
+    """When a Go1 policy walks: for every command, ``episodes`` episodes (seeds ``seed``,
+    ``seed + 1``, ...) all survive, and the mean episode x- and y-velocity MSEs are at most
+    ``max_x_mse`` / ``max_y_mse`` (m/s)²."""
+
+    max_x_mse: float = 0.01
+    max_y_mse: float = 0.01
+    episodes: int = 5
+    seed: int = 0
+    commands: tuple[tuple[float, float, float], ...] = DEFAULT_COMMANDS
+
+    def __post_init__(self) -> None:
+        for name in ("max_x_mse", "max_y_mse"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+                raise ValueError(f"{name}={value!r}: expected a threshold > 0 in (m/s)^2")
+        if isinstance(self.episodes, bool) or not isinstance(self.episodes, int):
+            raise ValueError(f"episodes={self.episodes!r}: expected an integer >= 1")
+        if self.episodes < 1:
+            raise ValueError(f"episodes={self.episodes!r}: expected an integer >= 1")
+        if not self.commands:
+            raise ValueError("commands=(): expected at least one (vx, vy, wz) command")
+
+    def passes(self, row: dict[str, Any]) -> bool:
+        """Does one command's :func:`summarize` row meet the criterion?"""
+        return (
+            row["survival"] >= 1.0
+            and row["x_vel_mse"] <= self.max_x_mse
+            and row["y_vel_mse"] <= self.max_y_mse
+        )
+
+
+def check_walking(
+    env: Any, policy: Policy, criterion: WalkingCriterion
+) -> tuple[bool, list[dict[str, Any]]]:
+    """Whether ``policy`` walks by ``criterion``, and the summary rows evaluated.
+
+    Commands are evaluated in order and the check stops at the first one that fails
+    (and within it at the first fall), so a policy that does not walk costs little; the
+    rows then cover the commands evaluated so far.
+    """
+    rows: list[dict[str, Any]] = []
+    for command in criterion.commands:
+        results = []
+        for i in range(criterion.episodes):
+            result = run_episode(env, policy, command, criterion.seed + i)
+            results.append(result)
+            if not result.survived:
+                break
+        row = summarize(results)[0]
+        rows.append(row)
+        if not criterion.passes(row) or len(results) < criterion.episodes:
+            return False, rows
+    return True, rows

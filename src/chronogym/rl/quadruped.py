@@ -15,9 +15,9 @@ BACKENDS = ("ray", "serial")
 
 
 #: PPO settings of the documented Go1 run, on top of :func:`ppo_train_config`'s legged_gym
-#: defaults. Few envs (16-64 on a laptop instead of 4096 on a GPU) make each minibatch small and
-#: noisy: longer rollouts keep the batch at ~1.5k samples, a smaller initial action noise keeps
-#: the servos from shaking the robot, and a fixed learning rate replaces the
+#: defaults. Few envs (32 on a laptop instead of 4096 on a GPU) make each minibatch small and
+#: noisy: the default 32 envs x 48 steps keep the batch at ~1.5k samples, a smaller initial
+#: action noise keeps the servos from shaking the robot, and a fixed learning rate replaces the
 #: adaptive schedule, which drove the rate to its 1e-5 floor within the first iteration
 #: (``benchmarks/README.md``, "Go1 training").
 QUADRUPED_PPO: dict[str, Any] = {
@@ -76,7 +76,7 @@ def make_quadruped_vec_env(
 def train_quadruped(
     out: str | Path,
     *,
-    num_envs: int = 16,
+    num_envs: int = 32,
     backend: str = "ray",
     iterations: int | None = None,
     minutes: float | None = None,
@@ -89,17 +89,22 @@ def train_quadruped(
     torch_threads: int = 1,
     train_cfg: dict[str, Any] | None = None,
     progress: bool = True,
+    policy_lag: int = 1,
 ) -> Any:
     """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
 
     ``finetune`` swaps in the paper's conservative PPO settings (``FINETUNE_PPO``), as for
-    the transfer from rigid to deformable terrain. Returns :class:`~chronogym.rl.TrainResult`.
+    the transfer from rigid to deformable terrain. ``policy_lag=1`` overlaps each PPO update
+    with the next rollout (:mod:`chronogym.rl.overlap`). Returns
+    :class:`~chronogym.rl.TrainResult`.
     """
     from chronogym.rl.config import FINETUNE_PPO
+    from chronogym.rl.overlap import check_policy_lag
     from chronogym.rl.trainer import _check_budget, train
     from chronogym.rl.vecenv import RslRlVecEnv
 
     _check_budget(iterations, minutes)
+    check_policy_lag(policy_lag)
     if resume is not None and not Path(resume).is_file():
         raise FileNotFoundError(f"resume={str(resume)!r}: no such checkpoint file")
     cfg = train_cfg if train_cfg is not None else quadruped_train_config()
@@ -120,6 +125,7 @@ def train_quadruped(
             torch_threads=torch_threads,
             progress=progress,
             seed=seed,
+            policy_lag=policy_lag,
         )
     finally:
         env.close()

@@ -32,6 +32,7 @@ CSV_HEADER = (
     "y_mse",
     "collect_s",
     "learn_s",
+    "policy_lag",
 )
 X_KEY = "/metrics/x_vel_mse"
 Y_KEY = "/metrics/y_vel_mse"
@@ -149,6 +150,7 @@ def train(
     torch_threads: int = 1,
     progress: bool = True,
     seed: int = 0,
+    policy_lag: int = 0,
     log: Callable[[str], Any] = print,
     verbose: bool = False,
 ) -> TrainResult:
@@ -166,15 +168,21 @@ def train(
     e.g. ``ppo_train_config(algorithm=FINETUNE_PPO)``), that rate replaces the
     checkpoint's adapted one. The vector env is not closed here.
 
+    ``policy_lag``: 0 runs synchronous PPO (collect, then update); 1 runs each update in
+    a thread while the next rollout is collected with the policy from before that update
+    (see :mod:`chronogym.rl.overlap`). ``progress.csv`` records the lag of every update.
+
     ``verbose``: let RSL-RL print its model summary and per-iteration console block.
     """
     import torch
     from rsl_rl.runners import OnPolicyRunner
 
     from chronogym.rl.config import ppo_train_config
+    from chronogym.rl.overlap import BehaviorPolicy, Learner, check_policy_lag
     from chronogym.rl.vecenv import RslRlVecEnv
 
     _check_budget(iterations, minutes)
+    check_policy_lag(policy_lag)
     torch.set_num_threads(torch_threads)
     torch.manual_seed(seed)
     np.random.seed(seed)
@@ -213,6 +221,11 @@ def train(
     budget_s = minutes * 60.0 if minutes is not None else math.inf
     total_it = start_it + iterations if iterations is not None else None
     rnd = bool(cfg["algorithm"].get("rnd_cfg"))
+    if policy_lag and (rnd or alg.actor.is_recurrent or alg.critic.is_recurrent):
+        raise ValueError(
+            f"policy_lag={policy_lag} needs feed-forward actor and critic without RND; "
+            "expected policy_lag=0 for this config"
+        )
     env_info = {
         "observation_dim": env.num_obs,
         "num_actions": env.num_actions,
@@ -241,33 +254,68 @@ def train(
     it = start_it - 1
     obs = env.get_observations().to(runner.device)
     alg.train_mode()
+    behavior = BehaviorPolicy(alg, seed + 7919 if policy_lag else None)
+
+    def collect() -> tuple[list[float], list[float]]:
+        """One rollout with the behavior policy into its storage, returns computed; the
+        x/y velocity MSEs of the episodes that ended meanwhile."""
+        nonlocal obs
+        x_errors: list[float] = []
+        y_errors: list[float] = []
+        actor = behavior.alg
+        with torch.inference_mode():
+            for _ in range(steps_per_env):
+                actions = actor.act(obs)
+                obs, rewards, dones, extras = env.step(actions.to(env.device))
+                obs = obs.to(runner.device)
+                rewards, dones = rewards.to(runner.device), dones.to(runner.device)
+                actor.process_env_step(obs, rewards, dones, extras)
+                intrinsic = actor.intrinsic_rewards if rnd else None
+                logger.process_env_step(rewards, dones, extras, intrinsic)
+                episode_log = extras.get("log", {})
+                if X_KEY in episode_log:
+                    x_errors.extend(episode_log[X_KEY].tolist())
+                if Y_KEY in episode_log:
+                    y_errors.extend(episode_log[Y_KEY].tolist())
+            actor.compute_returns(obs)
+        return x_errors, y_errors
+
     try:
         with csv_path.open("w" if new_csv else "a", newline="") as handle:
             writer = csv.writer(handle)
             if new_csv:
                 writer.writerow(CSV_HEADER)
             it = start_it
+            errors: tuple[list[float], list[float]] = ([], [])
+            if policy_lag:  # the first rollout, before any update can overlap it
+                behavior.sync(alg, it)
+                errors = collect()
+                behavior.swap_storage(alg)
             while True:
                 it_start = time.perf_counter()
-                x_errors: list[float] = []
-                y_errors: list[float] = []
-                with torch.inference_mode():
-                    for _ in range(steps_per_env):
-                        actions = alg.act(obs)
-                        obs, rewards, dones, extras = env.step(actions.to(env.device))
-                        obs = obs.to(runner.device)
-                        rewards, dones = rewards.to(runner.device), dones.to(runner.device)
-                        alg.process_env_step(obs, rewards, dones, extras)
-                        intrinsic = alg.intrinsic_rewards if rnd else None
-                        logger.process_env_step(rewards, dones, extras, intrinsic)
-                        episode_log = extras.get("log", {})
-                        if X_KEY in episode_log:
-                            x_errors.extend(episode_log[X_KEY].tolist())
-                        if Y_KEY in episode_log:
-                            y_errors.extend(episode_log[Y_KEY].tolist())
+                rollout_version = behavior.version
+                behavior.sync(alg, it)
+                if policy_lag:  # update on the stored rollout while the next one is collected
+                    learner = Learner(alg)
+                    new_errors = collect()
                     collect_end = time.perf_counter()
-                    alg.compute_returns(obs)
-                loss_dict = alg.update()
+                    loss_dict = learner.join()
+                    learn_s = learner.seconds
+                    behavior.swap_storage(alg)
+                    errors = (errors[0] + new_errors[0], errors[1] + new_errors[1])
+                else:
+                    rollout_version = it
+                    errors = collect()
+                    collect_end = time.perf_counter()
+                    behavior.swap_storage(alg)
+                    loss_dict = alg.update()
+                    learn_s = time.perf_counter() - collect_end
+                lag = it - rollout_version
+                if not 0 <= lag <= policy_lag:
+                    raise AssertionError(
+                        f"update {it} used a rollout of policy version {rollout_version}: "
+                        f"lag {lag}, expected 0..{policy_lag}"
+                    )
                 learn_end = time.perf_counter()
                 env_steps += steps_per_env * env.num_envs
                 runner.current_learning_iteration = it
@@ -277,7 +325,7 @@ def train(
                         start_it=start_it,
                         total_it=total_it if total_it is not None else it + 1,
                         collect_time=collect_end - it_start,
-                        learn_time=learn_end - collect_end,
+                        learn_time=learn_s,
                         loss_dict=loss_dict,
                         learning_rate=alg.learning_rate,
                         action_std=alg.get_policy().output_std,
@@ -291,11 +339,13 @@ def train(
                     "mean_reward": (
                         statistics.mean(logger.rewbuffer) if logger.rewbuffer else math.nan
                     ),
-                    "x_mse": _mean(x_errors),
-                    "y_mse": _mean(y_errors),
+                    "x_mse": _mean(errors[0]),
+                    "y_mse": _mean(errors[1]),
                     "collect_s": collect_end - it_start,
-                    "learn_s": learn_end - collect_end,
+                    "learn_s": learn_s,
+                    "policy_lag": lag,
                 }
+                errors = ([], [])
                 writer.writerow([row[key] for key in CSV_HEADER])
                 handle.flush()
                 bar.update(row)

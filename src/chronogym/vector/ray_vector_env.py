@@ -10,6 +10,7 @@ from typing import Any
 from gymnasium.vector import AutoresetMode
 
 from chronogym.ray_runtime import (
+    WORKER_NICENESS,
     actor_scheduling,
     check_worker_gpus,
     cluster_cpus,
@@ -58,6 +59,11 @@ class RayVectorEnv(WorkerVectorEnv):
             ``num_cpus``: the cluster's CPUs shared evenly, at most 1 each.
         address: Ray cluster address; default ``RAY_ADDRESS``, else a local
             cluster is started (no dashboard).
+        worker_niceness: nice value of the workers of a local cluster this
+            call starts: 0 (default), the driver's own priority; None keeps
+            Ray's default of 15, at which the workers yield their cores to any
+            busy process. A cluster that is joined (or already running) keeps
+            its own; start it with ``RAY_worker_niceness=0 ray start ...``.
         scheduling: ``"default"`` (Ray's own placement: nodes with room,
             the driver's first) or ``"spread"`` (``scheduling_strategy="SPREAD"``: the
             workers go to as many nodes as possible).
@@ -122,6 +128,7 @@ class RayVectorEnv(WorkerVectorEnv):
         num_cpus: float | None = None,
         num_gpus: float = 0,
         address: str | None = None,
+        worker_niceness: int | None = WORKER_NICENESS,
         scheduling: str = "default",
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
         max_restarts: int = 3,
@@ -154,7 +161,7 @@ class RayVectorEnv(WorkerVectorEnv):
         if step_timeout is not None and not step_timeout > 0:
             raise ValueError(f"step_timeout={step_timeout!r}: expected None or seconds > 0")
         actor_scheduling(scheduling)  # validate before starting Ray
-        ensure_ray(address)
+        ensure_ray(address, worker_niceness)
         if envs_per_worker is None:
             cpus = max(1, int(cluster_cpus()))
             envs_per_worker = math.ceil(count / cpus)

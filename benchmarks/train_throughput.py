@@ -1,0 +1,128 @@
+"""PPO training throughput on Go1, configurations side by side in one run, with a breakdown.
+
+Each configuration trains from scratch for ``--iterations`` PPO iterations in its own
+subprocess (its own local Ray for the Ray backend); the configurations alternate round by
+round, so machine noise falls on all of them. Reported per configuration (medians over the
+rounds, each round the median over iterations after ``--warmup``): env-steps/s, the
+iteration's wall time, its rollout (``collect_s``) and update (``learn_s``) seconds, and the
+ratio to the first configuration.
+
+    python benchmarks/train_throughput.py                        # default comparison
+    python benchmarks/train_throughput.py --configs serial:16:0 ray:16:0 ray:16:1 --rounds 3
+
+A configuration is ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>]`` (steps per
+env per iteration default to the Go1 settings, 48).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from common import RESULTS, Column, header, settings, table, write_json
+
+DEFAULT_CONFIGS = ("serial:16:0", "ray:16:0", "ray:16:1", "serial:16:1")
+OUT = RESULTS / "train_throughput.json"
+
+# Runs in the subprocess: train one configuration, print its per-iteration rows as JSON.
+TRAIN = r"""
+import csv, json, sys
+from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
+backend, num_envs, lag, steps, iterations, out = json.loads(sys.argv[1])
+cfg = quadruped_train_config(**({"num_steps_per_env": steps} if steps else {}))
+result = train_quadruped(out, num_envs=num_envs, backend=backend, iterations=iterations,
+                         policy_lag=lag, train_cfg=cfg, progress=False)
+with open(result.csv_path, newline="") as handle:
+    print(json.dumps(list(csv.DictReader(handle))))
+"""
+
+
+def parse_config(text: str) -> tuple[str, int, int, int | None]:
+    parts = text.split(":")
+    try:
+        backend, envs, lag = parts[0], int(parts[1]), int(parts[2])
+        steps = int(parts[3]) if len(parts) > 3 else None
+    except (IndexError, ValueError):
+        backend = ""
+    if backend not in ("ray", "serial") or len(parts) > 4:
+        raise argparse.ArgumentTypeError(
+            f"config {text!r}: expected '<ray|serial>:<num_envs>:<policy_lag>[:<steps>]', "
+            "e.g. ray:16:1"
+        )
+    return backend, envs, lag, steps
+
+
+def run_once(config: str, iterations: int, warmup: int) -> dict[str, float]:
+    """Train ``config`` once; medians over its iterations after ``warmup``."""
+    backend, envs, lag, steps = parse_config(config)
+    with tempfile.TemporaryDirectory(prefix="chronogym-train-") as out:
+        arg = json.dumps([backend, envs, lag, steps, iterations, out])
+        done = subprocess.run(
+            [sys.executable, "-c", TRAIN, arg], capture_output=True, text=True, check=False
+        )
+    if done.returncode != 0:
+        raise RuntimeError(f"{config} failed:\n{done.stderr[-3000:]}")
+    rows = json.loads(done.stdout.strip().splitlines()[-1])[warmup:]
+    walls = [float(r["wall_time"]) for r in rows]
+    per_it = [b - a for a, b in itertools.pairwise(walls)]
+    samples = (int(rows[1]["env_steps"]) - int(rows[0]["env_steps"])) if len(rows) > 1 else 0
+    it_s = statistics.median(per_it)
+    return {
+        "iteration_s": it_s,
+        "env_steps_per_s": samples / it_s,
+        "collect_s": statistics.median(float(r["collect_s"]) for r in rows),
+        "learn_s": statistics.median(float(r["learn_s"]) for r in rows),
+        "samples_per_iteration": samples,
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--configs", nargs="+", default=list(DEFAULT_CONFIGS))
+    parser.add_argument("--iterations", type=int, default=30)
+    parser.add_argument("--warmup", type=int, default=5, help="iterations left out")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args(argv)
+    for config in args.configs:
+        parse_config(config)
+    if args.iterations < args.warmup + 3 or args.rounds < 1:
+        parser.error(
+            f"--iterations={args.iterations} --rounds={args.rounds}: expected iterations >= "
+            "warmup + 3 and rounds >= 1"
+        )
+    runs: dict[str, list[dict[str, float]]] = {c: [] for c in args.configs}
+    for r in range(args.rounds):
+        order = args.configs if r % 2 == 0 else list(reversed(args.configs))
+        for config in order:
+            runs[config].append(run_once(config, args.iterations, args.warmup))
+            rate = runs[config][-1]["env_steps_per_s"]
+            print(f"round {r + 1}/{args.rounds} {config}: {rate:,.0f} env-steps/s", flush=True)
+    base = statistics.median(x["env_steps_per_s"] for x in runs[args.configs[0]])
+    rows = []
+    for config, samples in runs.items():
+        med = {k: statistics.median(x[k] for x in samples) for k in samples[0]}
+        rows.append({"config": config, **med, "vs_first": med["env_steps_per_s"] / base,
+                     "rounds": samples})  # fmt: skip
+    columns = [
+        Column("config", 14, align="<", key="config"),
+        Column("env-steps/s", 11, "{:,.0f}", key="env_steps_per_s"),
+        Column("x first", 7, "{:.2f}", key="vs_first"),
+        Column("iter s", 7, "{:.3f}", key="iteration_s"),
+        Column("collect s", 9, "{:.3f}", key="collect_s"),
+        Column("learn s", 7, "{:.3f}", key="learn_s"),
+    ]
+    print()
+    print(table(columns, rows, rule=True))
+    record = {**header("train_throughput", "torch", "rsl-rl-lib"), "settings": settings(args)}
+    write_json(args.out, {**record, "rows": rows})
+
+
+if __name__ == "__main__":
+    main()
