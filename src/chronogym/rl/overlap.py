@@ -68,8 +68,7 @@ class BehaviorPolicy:
     def _private_noise(self, generator: torch.Generator) -> None:
         """Draw the actor's action noise from ``generator`` instead of torch's global one."""
         distribution = self.alg.actor.distribution
-        inner = getattr(distribution, "_distribution", ...)
-        if inner is ...:
+        if not hasattr(distribution, "_distribution"):
             raise TypeError(
                 f"policy_lag=1 needs a Gaussian action distribution; got {type(distribution)}"
             )
