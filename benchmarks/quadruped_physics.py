@@ -9,7 +9,13 @@ For each setting (friction cone, physics step ``dt``, ``k`` substeps per 20 ms p
 * ``task_us`` and ``task/raw`` (the task's default setting only): the full ``SimEnv.step`` of
   ``Go1VelocityTask`` against the raw loop over the same states: the task's overhead.
 
+With ``--policy CKPT`` it also plays a trained policy at each physics step of the elliptic,
+impratio-100 settings (the walking criterion's commands and episodes, ``WalkingCriterion``):
+a policy trained at one step that walks as well at the smaller ones has not learned to exploit
+the step's error.
+
     python benchmarks/quadruped_physics.py [--out benchmarks/results/quadruped_physics.json]
+    python benchmarks/quadruped_physics.py --policy runs/quadruped/latest.pt
 
 Prints a table and writes JSON. Timings are one core, best of ``--repeats``.
 """
@@ -41,6 +47,7 @@ SETTINGS = [  # (cone, dt, impratio)
     ("pyramidal", 0.002, 1.0),
     ("elliptic", 0.002, 100.0),
     ("pyramidal", 0.01, 1.0),
+    ("elliptic", 0.01, 100.0),
 ]
 
 
@@ -148,11 +155,59 @@ def task_cost(env: SimEnv, targets: np.ndarray, repeats: int) -> tuple[float, fl
     return best_task / len(targets) * 1e6, best_raw
 
 
+def policy_across_steps(checkpoint: Path, rows: list[Row]) -> list[dict]:
+    """The walking criterion's summary of ``checkpoint`` at each elliptic, impratio-100 step."""
+    from chronogym.rl.evaluate import WalkingCriterion, evaluate, summarize
+    from chronogym.rl.trainer import load_policy
+
+    criterion = WalkingCriterion()
+    policy = load_policy(checkpoint)
+    results = []
+    for row in rows:
+        if (row.cone, row.impratio) != ("elliptic", 100.0):
+            continue
+        env = SimEnv(Go1VelocityTask(dt=row.dt, k=row.k))
+        episodes = evaluate(
+            env,
+            policy,
+            commands=criterion.commands,
+            episodes=criterion.episodes,
+            seed=criterion.seed,
+            progress=False,
+        )
+        summary = summarize(episodes)
+        env.close()
+        results.append({
+            "dt": row.dt, "k": row.k,
+            "walks": all(criterion.passes(r) for r in summary),
+            "commands_passed": sum(criterion.passes(r) for r in summary),
+            "min_survival": min(r["survival"] for r in summary),
+            "worst_x_mse": max(r["x_vel_mse"] for r in summary),
+            "worst_y_mse": max(r["y_vel_mse"] for r in summary),
+            "per_command": summary,
+        })  # fmt: skip
+    return results
+
+
+POLICY_COLUMNS = (
+    Column("dt", 6, "{:.3f}", key="dt"),
+    Column("k", 3, "{:d}", key="k"),
+    Column("walks", 6, key="walks"),
+    Column("passed", 6, "{:d}", key="commands_passed"),
+    Column("survival", 8, "{:.2f}", key="min_survival"),
+    Column("worst x_mse", 11, "{:.4f}", key="worst_x_mse"),
+    Column("worst y_mse", 11, "{:.4f}", key="worst_y_mse"),
+)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--policy", type=Path, default=None, help="a checkpoint to play")
     args = parser.parse_args()
+    if args.policy is not None and not args.policy.is_file():
+        parser.error(f"--policy={args.policy}: no such checkpoint file")
     targets = action_sequence(STEPS)
     rows: list[Row] = []
     for cone, dt, impratio in SETTINGS:
@@ -177,6 +232,10 @@ def main() -> None:
     chosen.task_us = task_us
     chosen.task_over_raw = task_us / raw_us
     print(table(COLUMNS, rows, sep=" ", missing=""))
+    played = policy_across_steps(args.policy, rows) if args.policy is not None else None
+    if played is not None:
+        print(f"\npolicy {args.policy} (trained at the task's default step) at each step:")
+        print(table(POLICY_COLUMNS, played, sep=" "))
     result = {
         **header("quadruped_physics"),
         **versions("mujoco"),  # also at the top, as earlier records had it
@@ -184,6 +243,9 @@ def main() -> None:
         "policy_steps": STEPS,
         "rows": [asdict(row) for row in rows],
     }
+    if played is not None:
+        result["policy"] = {"checkpoint": str(args.policy), "default_dt": task.dt,
+                            "steps": played}  # fmt: skip
     write_json(args.out, result)
 
 

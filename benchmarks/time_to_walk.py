@@ -11,10 +11,13 @@ and ``time_to_walk.png`` (commands passed and worst MSE against wall clock, one 
 
     python benchmarks/time_to_walk.py --configs serial:32:0 ray:64:1:24 --seeds 0 1
     python benchmarks/time_to_walk.py --evaluate-only      # re-check the runs already there
+    python benchmarks/time_to_walk.py --configs ray:32:1:48 --keep   # add to earlier results
 
-A configuration is ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>]`` as in
-``train_throughput.py``; ``serial:32:0`` is the README's former training command, the
-new default is ``chronogym train quadruped``'s.
+A configuration is ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>]]``
+as in ``train_throughput.py``; ``serial:32:0:48:5`` is the README's former training command
+(serial, synchronous, 5 ms physics), ``ray:32:1:48`` the new default of ``chronogym train
+quadruped``. ``--keep`` keeps the results of configurations already in ``--out`` that this
+invocation does not run (each keeps its own settings and machine record).
 """
 
 from __future__ import annotations
@@ -43,15 +46,16 @@ def train_run(config: str, seed: int, minutes: float, save_interval: int, runs: 
 
     from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
 
-    backend, envs, lag, steps = parse_config(config)
+    c = parse_config(config)
     out = runs / run_name(config, seed)
     shutil.rmtree(out, ignore_errors=True)
     overrides: dict[str, Any] = {"save_interval": save_interval}
-    if steps:
-        overrides["num_steps_per_env"] = steps
+    if c.steps:
+        overrides["num_steps_per_env"] = c.steps
     train_quadruped(
-        out, num_envs=envs, backend=backend, minutes=minutes, seed=seed, policy_lag=lag,
-        train_cfg=quadruped_train_config(**overrides),
+        out, num_envs=c.num_envs, backend=c.backend, minutes=minutes, seed=seed,
+        policy_lag=c.policy_lag, train_cfg=quadruped_train_config(**overrides),
+        task_kwargs=c.task_kwargs(),
     )  # fmt: skip
     return out
 
@@ -68,8 +72,9 @@ def checkpoints(run: Path) -> list[tuple[int, float, int, Path]]:
     return sorted(found)
 
 
-def evaluate_run(run: Path, criterion: Any) -> list[dict[str, Any]]:
-    """Check the run's checkpoints in order until one walks; one row per checkpoint."""
+def evaluate_run(run: Path, criterion: Any, config: str) -> list[dict[str, Any]]:
+    """Check the run's checkpoints in order until one walks, on the physics step the run
+    trained with; one row per checkpoint."""
     import gymnasium as gym
 
     import chronogym  # noqa: F401
@@ -77,7 +82,7 @@ def evaluate_run(run: Path, criterion: Any) -> list[dict[str, Any]]:
     from chronogym.rl.quadruped import ENV_ID
     from chronogym.rl.trainer import load_policy
 
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, **parse_config(config).task_kwargs())
     rows = []
     try:
         for it, wall, steps, path in checkpoints(run):
@@ -126,6 +131,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--save-interval", type=int, default=40, help="iterations")
     parser.add_argument("--max-mse", type=float, default=0.01, help="(m/s)², x and y")
     parser.add_argument("--evaluate-only", action="store_true")
+    parser.add_argument(
+        "--keep", action="store_true", help="keep earlier results of configurations not run now"
+    )
     parser.add_argument("--runs", type=Path, default=RUNS)
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args(argv)
@@ -146,7 +154,7 @@ def main(argv: list[str] | None = None) -> None:
     rows: list[dict[str, Any]] = []
     summary = []
     for config, seed in runs:
-        checked = evaluate_run(args.runs / run_name(config, seed), criterion)
+        checked = evaluate_run(args.runs / run_name(config, seed), criterion, config)
         rows += [{"config": config, "seed": seed, **r} for r in checked]
         walked = [r for r in checked if r["walks"]]
         summary.append({
@@ -155,14 +163,18 @@ def main(argv: list[str] | None = None) -> None:
             "env_steps": walked[0]["env_steps"] if walked else None,
             "trained_min": checkpoints(args.runs / run_name(config, seed))[-1][1] / 60,
         })  # fmt: skip
+    earlier = load_earlier(args.out, args.configs) if args.keep else {"rows": [], "runs": []}
+    rows = earlier["rows"] + rows
+    summary = earlier["runs"] + summary
+    configs = list(dict.fromkeys([s["config"] for s in summary]))
     medians = {}
-    for config in args.configs:
+    for config in configs:
         times = [s["time_to_walk_min"] for s in summary if s["config"] == config]
         # a run that never walked counts as longer than its budget
         ranked = [t if t is not None else math.inf for t in times]
         medians[config] = statistics.median(ranked)
         shown = ", ".join("-" if t is None else f"{t:.1f}" for t in times)
-        print(f"{config:<14} time-to-walk (min): median {medians[config]:.1f}; runs {shown}")
+        print(f"{config:<16} time-to-walk (min): median {medians[config]:.1f}; runs {shown}")
     args.out.mkdir(parents=True, exist_ok=True)
     with (args.out / "time_to_walk.csv").open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["config"])
@@ -171,13 +183,52 @@ def main(argv: list[str] | None = None) -> None:
     plot(rows, criterion, args.out / "time_to_walk.png")
     record = {
         **header("time_to_walk", "torch", "rsl-rl-lib"),
-        "settings": settings(args),
+        "settings": {**earlier.get("settings", {}),
+                     **{config: {**settings(args), "ppo": ppo_settings()}
+                        for config in args.configs}},
         "criterion": {"max_x_mse": criterion.max_x_mse, "max_y_mse": criterion.max_y_mse,
                       "episodes": criterion.episodes, "commands": criterion.commands},
         "median_min": {k: (None if math.isinf(v) else v) for k, v in medians.items()},
         "runs": summary,
     }  # fmt: skip
+    if earlier.get("machines"):
+        record["earlier_machines"] = earlier["machines"]
     write_json(args.out / "time_to_walk.json", record)
+
+
+def ppo_settings() -> dict[str, Any]:
+    """The PPO settings the runs trained with (``quadruped_train_config``'s algorithm and
+    initial action noise)."""
+    from chronogym.rl.quadruped import quadruped_train_config
+
+    cfg = quadruped_train_config()
+    return {**cfg["algorithm"], "init_std": cfg["actor"]["distribution_cfg"]["init_std"]}
+
+
+def load_earlier(out: Path, running: list[str]) -> dict[str, Any]:
+    """The rows, run summaries, settings and machine records in ``out`` of the configurations
+    that are not in ``running``."""
+    path = out / "time_to_walk.json"
+    if not path.exists():
+        return {"rows": [], "runs": []}
+    import json
+
+    record = json.loads(path.read_text())
+    kept = [r for r in record.get("runs", []) if r["config"] not in running]
+    names = {r["config"] for r in kept}
+    with (out / "time_to_walk.csv").open(newline="") as handle:
+        rows = [r for r in csv.DictReader(handle) if r["config"] in names]
+    for row in rows:  # CSV text back to numbers
+        for key in ("seed", "iteration", "env_steps", "commands_passed"):
+            row[key] = int(row[key])
+        for key in ("wall_time", "worst_mse"):
+            row[key] = float(row[key])
+        row["walks"] = row["walks"] == "True"
+    machines = {**record.get("earlier_machines", {})}
+    for name in names:
+        machines.setdefault(name, {"date": record.get("date"), **record.get("machine", {})})
+    settings_kept = {k: v for k, v in record.get("settings", {}).items() if k in names}
+    return {"rows": rows, "runs": kept, "settings": settings_kept, "machines": machines}
 
 
 if __name__ == "__main__":

@@ -10,8 +10,9 @@ ratio to the first configuration.
     python benchmarks/train_throughput.py                        # default comparison
     python benchmarks/train_throughput.py --configs serial:16:0 ray:16:0 ray:16:1 --rounds 3
 
-A configuration is ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>]`` (steps per
-env per iteration default to the Go1 settings, 48).
+A configuration is ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>]]``
+(steps per env per iteration default to the Go1 settings, 48; the physics step to the task's,
+10 ms; ``serial:32:0:48:5`` is the former training command: serial, synchronous, 5 ms).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 from common import RESULTS, Column, header, settings, table, write_json
@@ -34,35 +36,70 @@ OUT = RESULTS / "train_throughput.json"
 TRAIN = r"""
 import csv, json, sys
 from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
-backend, num_envs, lag, steps, iterations, out = json.loads(sys.argv[1])
+backend, num_envs, lag, steps, task_kwargs, iterations, out = json.loads(sys.argv[1])
 cfg = quadruped_train_config(**({"num_steps_per_env": steps} if steps else {}))
 result = train_quadruped(out, num_envs=num_envs, backend=backend, iterations=iterations,
-                         policy_lag=lag, train_cfg=cfg, progress=False)
+                         policy_lag=lag, train_cfg=cfg, progress=False, task_kwargs=task_kwargs)
 with open(result.csv_path, newline="") as handle:
     print(json.dumps(list(csv.DictReader(handle))))
 """
 
 
-def parse_config(text: str) -> tuple[str, int, int, int | None]:
+@dataclass(frozen=True)
+class TrainConfig:
+    """``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>]]``."""
+
+    backend: str
+    num_envs: int
+    policy_lag: int
+    steps: int | None = None  # steps per env per iteration (None: the Go1 default, 48)
+    physics_ms: float | None = None  # physics step in ms (None: the task's default)
+
+    def task_kwargs(self) -> dict[str, float | int]:
+        """The task's ``dt`` and ``k`` for ``physics_ms`` (20 ms per decision), or none."""
+        if self.physics_ms is None:
+            return {}
+        return {"dt": self.physics_ms / 1000, "k": round(CONTROL_MS / self.physics_ms)}
+
+
+CONTROL_MS = 20.0  # the Go1 task's decision interval
+
+
+def parse_config(text: str) -> TrainConfig:
     parts = text.split(":")
     try:
-        backend, envs, lag = parts[0], int(parts[1]), int(parts[2])
-        steps = int(parts[3]) if len(parts) > 3 else None
-    except (IndexError, ValueError):
-        backend = ""
-    if backend not in ("ray", "serial") or len(parts) > 4:
-        raise argparse.ArgumentTypeError(
-            f"config {text!r}: expected '<ray|serial>:<num_envs>:<policy_lag>[:<steps>]', "
-            "e.g. ray:16:1"
+        config = TrainConfig(
+            parts[0],
+            int(parts[1]),
+            int(parts[2]),
+            int(parts[3]) if len(parts) > 3 else None,
+            float(parts[4]) if len(parts) > 4 else None,
         )
-    return backend, envs, lag, steps
+    except (IndexError, ValueError):
+        config = None
+    ms = config.physics_ms if config else None
+    if (
+        config is None
+        or config.backend not in ("ray", "serial")
+        or len(parts) > 5
+        or config.num_envs < 1
+        or config.policy_lag not in (0, 1)
+        or (config.steps is not None and config.steps < 1)
+        or (ms is not None and not (ms > 0 and (CONTROL_MS / ms).is_integer()))
+    ):
+        raise argparse.ArgumentTypeError(
+            f"config {text!r}: expected '<ray|serial>:<num_envs>:<policy_lag 0|1>"
+            "[:<steps_per_env>[:<physics_ms dividing 20>]]', e.g. ray:32:1 or serial:32:0:48:5"
+        )
+    return config
 
 
 def run_once(config: str, iterations: int, warmup: int) -> dict[str, float]:
     """Train ``config`` once; medians over its iterations after ``warmup``."""
-    backend, envs, lag, steps = parse_config(config)
+    c = parse_config(config)
     with tempfile.TemporaryDirectory(prefix="chronogym-train-") as out:
-        arg = json.dumps([backend, envs, lag, steps, iterations, out])
+        arg = json.dumps([c.backend, c.num_envs, c.policy_lag, c.steps, c.task_kwargs(),
+                          iterations, out])  # fmt: skip
         done = subprocess.run(
             [sys.executable, "-c", TRAIN, arg], capture_output=True, text=True, check=False
         )

@@ -380,3 +380,23 @@ def test_same_seed_same_trajectory_on_ray_and_in_gymnasium(ray_cluster):
 def test_same_seed_same_trajectory_on_soil_on_ray_and_in_gymnasium(ray_cluster):
     """Go1 on soil (fresh soil after each reset): Ray (2 workers) == SyncVectorEnv."""
     _ray_matches_gymnasium(2, 1, 20, terrain="soil", max_episode_steps=8)
+
+
+def test_feet_slip_penalizes_feet_that_slide_on_the_ground_only():
+    env = _env(reset_joint_noise=0.0, rewards=RewardWeights(feet_slip=-0.25))
+    task = env.task
+    assert _terms(task)["feet_slip"] == pytest.approx(0.0, abs=1e-12)  # nothing moved yet
+    task.data.qpos[0] += 0.01  # the whole robot, feet on the ground, slid 1 cm in one step
+    mujoco.mj_forward(task.model, task.data)
+    expected = -0.25 * 4 * (0.01 / task.control_dt) ** 2 * task.control_dt
+    assert _terms(task)["feet_slip"] == pytest.approx(expected, rel=1e-6)
+    assert _terms(task)["feet_slip"] == pytest.approx(0.0, abs=1e-12)  # and then stood still
+    task.data.qpos[2] += 0.2  # lifted off the ground: no foot is in contact
+    task.data.qpos[0] += 0.01
+    mujoco.mj_forward(task.model, task.data)
+    assert _terms(task)["feet_slip"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_feet_slip_is_off_by_default():
+    assert RewardWeights().feet_slip == 0.0
+    assert "feet_slip" not in _env().task.reward_terms

@@ -71,6 +71,7 @@ class RewardWeights:
     joint_posture: float = -0.05  # |q - q_default|^2
     torques: float = -1e-4  # |tau|^2
     feet_air_time: float = 1.0  # sum over touchdowns of (air time - threshold), if moving
+    feet_slip: float = 0.0  # sum over feet on the ground of their horizontal speed^2
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
