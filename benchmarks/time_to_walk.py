@@ -9,15 +9,16 @@ the first that passes; its wall time (from the run's ``progress.csv``) is the ru
 time-to-walk. Writes ``time_to_walk.json``, ``time_to_walk.csv`` (every checkpoint checked)
 and ``time_to_walk.png`` (commands passed and worst MSE against wall clock, one line per run).
 
-    python benchmarks/time_to_walk.py --configs serial:32:0 ray:64:1:24 --seeds 0 1
+    python benchmarks/time_to_walk.py --configs serial:32:0:48:5:1 ray:32:0 --seeds 0 1
     python benchmarks/time_to_walk.py --evaluate-only      # re-check the runs already there
-    python benchmarks/time_to_walk.py --configs ray:32:1:48 --keep   # add to earlier results
+    python benchmarks/time_to_walk.py --configs ray:32:0:48 --keep   # add to earlier results
 
-A configuration is ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>]]``
-as in ``train_throughput.py``; ``serial:32:0:48:5`` is the README's former training command
-(serial, synchronous, 5 ms physics), ``ray:32:1:48`` the new default of ``chronogym train
-quadruped``. ``--keep`` keeps the results of configurations already in ``--out`` that this
-invocation does not run (each keeps its own settings and machine record).
+A configuration is as in ``train_throughput.py``
+(``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``);
+``serial:32:0:48:5:1`` is the README's former training command (serial, synchronous, 5 ms
+physics, a 1-thread update), ``ray:32:0:48`` the new default of ``chronogym train quadruped``.
+``--keep`` keeps the results of configurations already in ``--out`` that this invocation does
+not run (each keeps its own settings and machine record).
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ def train_run(config: str, seed: int, minutes: float, save_interval: int, runs: 
     train_quadruped(
         out, num_envs=c.num_envs, backend=c.backend, minutes=minutes, seed=seed,
         policy_lag=c.policy_lag, train_cfg=quadruped_train_config(**overrides),
-        task_kwargs=c.task_kwargs(),
+        task_kwargs=c.task_kwargs(), update_threads=c.update_threads,
     )  # fmt: skip
     return out
 
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> None:
     from chronogym.rl.evaluate import WalkingCriterion
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--configs", nargs="+", default=["serial:32:0", "ray:64:1:24"])
+    parser.add_argument("--configs", nargs="+", default=["serial:32:0:48:5:1", "ray:32:0:48"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
     parser.add_argument("--minutes", type=float, default=12.0, help="training budget per run")
     parser.add_argument("--save-interval", type=int, default=40, help="iterations")

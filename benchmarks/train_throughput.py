@@ -10,9 +10,11 @@ ratio to the first configuration.
     python benchmarks/train_throughput.py                        # default comparison
     python benchmarks/train_throughput.py --configs serial:16:0 ray:16:0 ray:16:1 --rounds 3
 
-A configuration is ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>]]``
+A configuration is
+``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``
 (steps per env per iteration default to the Go1 settings, 48; the physics step to the task's,
-10 ms; ``serial:32:0:48:5`` is the former training command: serial, synchronous, 5 ms).
+10 ms; a synchronous update's threads to ``train_quadruped``'s, every CPU). ``serial:32:0:48:5:1``
+is the former training command: serial, synchronous, 5 ms physics, a 1-thread update.
 """
 
 from __future__ import annotations
@@ -29,17 +31,18 @@ from pathlib import Path
 
 from common import RESULTS, Column, header, settings, table, write_json
 
-DEFAULT_CONFIGS = ("serial:16:0", "ray:16:0", "ray:16:1", "serial:16:1")
+DEFAULT_CONFIGS = ("serial:32:0:48:5:1", "ray:32:0", "serial:32:0", "ray:32:1")
 OUT = RESULTS / "train_throughput.json"
 
 # Runs in the subprocess: train one configuration, print its per-iteration rows as JSON.
 TRAIN = r"""
 import csv, json, sys
 from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
-backend, num_envs, lag, steps, task_kwargs, iterations, out = json.loads(sys.argv[1])
+backend, num_envs, lag, steps, task_kwargs, threads, iterations, out = json.loads(sys.argv[1])
 cfg = quadruped_train_config(**({"num_steps_per_env": steps} if steps else {}))
 result = train_quadruped(out, num_envs=num_envs, backend=backend, iterations=iterations,
-                         policy_lag=lag, train_cfg=cfg, progress=False, task_kwargs=task_kwargs)
+                         policy_lag=lag, train_cfg=cfg, progress=False, task_kwargs=task_kwargs,
+                         update_threads=threads)
 with open(result.csv_path, newline="") as handle:
     print(json.dumps(list(csv.DictReader(handle))))
 """
@@ -47,13 +50,14 @@ with open(result.csv_path, newline="") as handle:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>]]``."""
+    """``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<threads>]]]``."""
 
     backend: str
     num_envs: int
     policy_lag: int
     steps: int | None = None  # steps per env per iteration (None: the Go1 default, 48)
     physics_ms: float | None = None  # physics step in ms (None: the task's default)
+    update_threads: int | None = None  # threads of a synchronous update (None: the default)
 
     def task_kwargs(self) -> dict[str, float | int]:
         """The task's ``dt`` and ``k`` for ``physics_ms`` (20 ms per decision), or none."""
@@ -74,6 +78,7 @@ def parse_config(text: str) -> TrainConfig:
             int(parts[2]),
             int(parts[3]) if len(parts) > 3 else None,
             float(parts[4]) if len(parts) > 4 else None,
+            int(parts[5]) if len(parts) > 5 else None,
         )
     except (IndexError, ValueError):
         config = None
@@ -81,15 +86,18 @@ def parse_config(text: str) -> TrainConfig:
     if (
         config is None
         or config.backend not in ("ray", "serial")
-        or len(parts) > 5
+        or len(parts) > 6
         or config.num_envs < 1
+        or (config.update_threads is not None and config.update_threads < 1)
+        or (config.update_threads is not None and config.policy_lag == 1)
         or config.policy_lag not in (0, 1)
         or (config.steps is not None and config.steps < 1)
         or (ms is not None and not (ms > 0 and (CONTROL_MS / ms).is_integer()))
     ):
         raise argparse.ArgumentTypeError(
             f"config {text!r}: expected '<ray|serial>:<num_envs>:<policy_lag 0|1>"
-            "[:<steps_per_env>[:<physics_ms dividing 20>]]', e.g. ray:32:1 or serial:32:0:48:5"
+            "[:<steps_per_env>[:<physics_ms dividing 20>[:<update threads, lag 0 only>]]]', "
+            "e.g. ray:32:0 or serial:32:0:48:5:1"
         )
     return config
 
@@ -99,7 +107,7 @@ def run_once(config: str, iterations: int, warmup: int) -> dict[str, float]:
     c = parse_config(config)
     with tempfile.TemporaryDirectory(prefix="chronogym-train-") as out:
         arg = json.dumps([c.backend, c.num_envs, c.policy_lag, c.steps, c.task_kwargs(),
-                          iterations, out])  # fmt: skip
+                          c.update_threads, iterations, out])  # fmt: skip
         done = subprocess.run(
             [sys.executable, "-c", TRAIN, arg], capture_output=True, text=True, check=False
         )

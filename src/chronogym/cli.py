@@ -221,6 +221,13 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise SystemExit(f"--minutes={args.minutes}: expected a number > 0")
     if args.torch_threads < 1:
         raise SystemExit(f"--torch-threads={args.torch_threads}: expected an integer >= 1")
+    if args.update_threads is not None and args.update_threads < 1:
+        raise SystemExit(f"--update-threads={args.update_threads}: expected an integer >= 1")
+    if args.update_threads is not None and args.policy_lag == 1:
+        raise SystemExit(
+            f"--update-threads={args.update_threads} with --policy-lag 1: the overlapped update "
+            "runs on --torch-threads; leave --update-threads out"
+        )
     if args.policy_lag not in (0, 1):
         raise SystemExit(
             f"--policy-lag={args.policy_lag}: expected 0 (synchronous PPO) or 1 (update "
@@ -247,6 +254,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         address=args.address,
         torch_threads=args.torch_threads,
         policy_lag=args.policy_lag,
+        update_threads=args.update_threads,
     )
     row = result.last_row
     print(
@@ -370,9 +378,15 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument(
         "--policy-lag",
         type=int,
-        default=1,
-        help="1 (default): run each PPO update while the next rollout is collected, one "
-        "update stale; 0: synchronous PPO",
+        default=0,
+        help="0 (default): synchronous PPO, the update on every core while the simulations "
+        "wait; 1: run each update while the next rollout is collected, one update stale",
+    )
+    tr.add_argument(
+        "--update-threads",
+        type=int,
+        default=None,
+        help="torch threads of the synchronous update (default: this machine's CPUs, at most 8)",
     )
     tr.set_defaults(func=cmd_train)
     play = sub.add_parser("play", help="roll out a trained policy, print errors, save a video")

@@ -131,4 +131,18 @@ def test_default_training_twice_gives_the_same_rows(ray_cluster, tmp_path):
         )  # fmt: skip
         tables.append(rows(result.csv_path))
     assert untimed(tables[0]) == untimed(tables[1])
-    assert [int(r["policy_lag"]) for r in tables[0]] == [0, 1, 1]  # the default: lag 1
+    # the default: synchronous PPO, its update on every core (2 threads on a 2-CPU machine)
+    assert [int(r["policy_lag"]) for r in tables[0]] == [0, 0, 0]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"update_threads": 0}, "update_threads=0: expected an integer >= 1"),
+        ({"torch_threads": True}, "torch_threads=True: expected an integer >= 1"),
+        ({"update_threads": 2, "policy_lag": 1}, "update_threads=2 with policy_lag=1"),
+    ],
+)
+def test_bad_thread_counts_name_the_value(tmp_path, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        train(None, tmp_path, iterations=1, **kwargs)

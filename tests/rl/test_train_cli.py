@@ -92,7 +92,7 @@ def test_play_writes_a_video(tmp_path):
     assert strip.shape[:2] == (height, 4 * width)  # the 4 frames side by side
 
 
-def test_train_defaults_to_ray_workers_with_overlapped_updates(tmp_path):
+def test_train_defaults_to_ray_workers_with_synchronous_updates(tmp_path):
     result = run_cli(
         "train", "quadruped", "--num-envs", "2", "--iterations", "3", "--out", str(tmp_path),
     )  # fmt: skip
@@ -101,7 +101,7 @@ def test_train_defaults_to_ray_workers_with_overlapped_updates(tmp_path):
     assert "on the ray backend" in result.stdout
     with (tmp_path / "progress.csv").open() as handle:
         lags = [int(row["policy_lag"]) for row in csv.DictReader(handle)]
-    assert lags == [0, 1, 1]  # the default overlaps each update with the next rollout
+    assert lags == [0, 0, 0]  # the default: synchronous PPO (the overlap is --policy-lag 1)
 
 
 @pytest.mark.parametrize(
@@ -113,6 +113,11 @@ def test_train_defaults_to_ray_workers_with_overlapped_updates(tmp_path):
         (["--minutes", "1", "--resume", "missing.pt"], "--resume=missing.pt: no such checkpoint"),
         (["--minutes", "1", "--policy-lag", "-1"], "--policy-lag=-1: expected 0 (synchronous"),
         (["--minutes", "1", "--backend", "bogus"], "argument --backend: invalid choice: 'bogus'"),
+        (["--minutes", "1", "--update-threads", "0"], "--update-threads=0: expected an integer"),
+        (
+            ["--minutes", "1", "--policy-lag", "1", "--update-threads", "2"],
+            "--update-threads=2 with --policy-lag 1",
+        ),
     ],
 )
 def test_train_rejects_bad_input(args, message, tmp_path):

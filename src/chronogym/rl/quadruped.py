@@ -19,7 +19,9 @@ BACKENDS = ("ray", "serial")
 #: noisy: the default 32 envs x 48 steps keep the batch at ~1.5k samples, a smaller initial
 #: action noise keeps the servos from shaking the robot, and a fixed learning rate replaces the
 #: adaptive schedule, which drove the rate to its 1e-5 floor within the first iteration
-#: (``benchmarks/README.md``, "Go1 training").
+#: (``benchmarks/README.md``, "Go1 training"). With ``policy_lag=1`` lower the entropy bonus
+#: (0.001 and a learning rate of 2e-4 walked sooner there; "Go1 training with the overlapped
+#: update").
 QUADRUPED_PPO: dict[str, Any] = {
     "num_steps_per_env": 48,
     "save_interval": 200,
@@ -37,11 +39,17 @@ def quadruped_train_config(**overrides: Any) -> dict[str, Any]:
     return _merge(ppo_train_config(**QUADRUPED_PPO), overrides)
 
 
-def env_kwargs_for(terrain: str) -> dict[str, Any]:
-    """Keyword arguments of the task for a terrain name."""
+def env_kwargs_for(terrain: str, task_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Keyword arguments of the task for a terrain name, plus ``task_kwargs`` (other
+    ``Go1VelocityTask`` arguments, e.g. ``{"dt": 0.005, "k": 4}``)."""
     if terrain not in TERRAINS:
         raise ValueError(f"terrain={terrain!r}: expected one of {TERRAINS}")
-    return {} if terrain == "rigid" else {"terrain": terrain}
+    extra = dict(task_kwargs or {})
+    if "terrain" in extra:
+        raise ValueError(
+            f"task_kwargs={task_kwargs!r}: give the terrain as terrain=..., not in task_kwargs"
+        )
+    return {**({} if terrain == "rigid" else {"terrain": terrain}), **extra}
 
 
 def make_quadruped_vec_env(
@@ -51,10 +59,12 @@ def make_quadruped_vec_env(
     terrain: str = "rigid",
     envs_per_worker: int | None = None,
     address: str | None = None,
+    task_kwargs: dict[str, Any] | None = None,
     **vector_kwargs: Any,
 ) -> Any:
     """``num_envs`` Go1 envs batched by ``backend`` ("ray" or "serial", the no-Ray baseline),
-    with Gymnasium's SAME_STEP autoreset that RSL-RL needs."""
+    with Gymnasium's SAME_STEP autoreset that RSL-RL needs; ``task_kwargs`` reach each
+    ``Go1VelocityTask``."""
     import gymnasium as gym
 
     from chronogym.vector.factory import make_vec
@@ -65,7 +75,7 @@ def make_quadruped_vec_env(
         raise ValueError(f"num_envs={num_envs!r}: expected an integer >= 1")
     kwargs: dict[str, Any] = {
         "autoreset_mode": gym.vector.AutoresetMode.SAME_STEP,
-        "env_kwargs": env_kwargs_for(terrain),
+        "env_kwargs": env_kwargs_for(terrain, task_kwargs),
         **vector_kwargs,
     }
     if backend == "ray":
@@ -89,14 +99,19 @@ def train_quadruped(
     torch_threads: int = 1,
     train_cfg: dict[str, Any] | None = None,
     progress: bool = True,
-    policy_lag: int = 1,
+    policy_lag: int = 0,
+    task_kwargs: dict[str, Any] | None = None,
+    update_threads: int | None = None,
 ) -> Any:
     """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
 
     ``finetune`` swaps in the paper's conservative PPO settings (``FINETUNE_PPO``), as for
     the transfer from rigid to deformable terrain. ``policy_lag=1`` overlaps each PPO update
-    with the next rollout (:mod:`chronogym.rl.overlap`). Returns
-    :class:`~chronogym.rl.TrainResult`.
+    with the next rollout (:mod:`chronogym.rl.overlap`). ``update_threads``: torch threads of
+    the synchronous update, while the simulations wait (default: every CPU this process may
+    use, at most 8; with ``policy_lag=1`` the update runs on ``torch_threads``).
+    ``task_kwargs``: further ``Go1VelocityTask`` arguments (e.g. the physics step
+    ``{"dt": 0.005, "k": 4}``). Returns :class:`~chronogym.rl.TrainResult`.
     """
     from chronogym.rl.config import FINETUNE_PPO
     from chronogym.rl.overlap import check_policy_lag
@@ -107,11 +122,18 @@ def train_quadruped(
     check_policy_lag(policy_lag)
     if resume is not None and not Path(resume).is_file():
         raise FileNotFoundError(f"resume={str(resume)!r}: no such checkpoint file")
+    if update_threads is None:
+        update_threads = torch_threads if policy_lag else default_update_threads()
     cfg = train_cfg if train_cfg is not None else quadruped_train_config()
     if finetune:
         cfg = {**cfg, "algorithm": {**cfg["algorithm"], **FINETUNE_PPO}}
     vec = make_quadruped_vec_env(
-        num_envs, backend, terrain=terrain, envs_per_worker=envs_per_worker, address=address
+        num_envs,
+        backend,
+        terrain=terrain,
+        envs_per_worker=envs_per_worker,
+        address=address,
+        task_kwargs=task_kwargs,
     )
     env = RslRlVecEnv(vec, seed=seed)
     try:
@@ -126,9 +148,21 @@ def train_quadruped(
             progress=progress,
             seed=seed,
             policy_lag=policy_lag,
+            update_threads=update_threads,
         )
     finally:
         env.close()
+
+
+def default_update_threads() -> int:
+    """Threads for a synchronous PPO update: the CPUs this process may run on, at most 8."""
+    import os
+
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        usable = os.cpu_count() or 1
+    return max(1, min(8, usable))
 
 
 def play_quadruped(

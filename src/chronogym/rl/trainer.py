@@ -80,6 +80,11 @@ def _check_budget(iterations: int | None, minutes: float | None) -> None:
         raise ValueError(f"minutes={minutes!r}: expected a number > 0")
 
 
+def _check_threads(name: str, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{name}={value!r}: expected an integer >= 1")
+
+
 def _mean(values: list[float]) -> float:
     return float(np.mean(values)) if values else math.nan
 
@@ -151,6 +156,7 @@ def train(
     progress: bool = True,
     seed: int = 0,
     policy_lag: int = 0,
+    update_threads: int | None = None,
     log: Callable[[str], Any] = print,
     verbose: bool = False,
 ) -> TrainResult:
@@ -172,6 +178,12 @@ def train(
     a thread while the next rollout is collected with the policy from before that update
     (see :mod:`chronogym.rl.overlap`). ``progress.csv`` records the lag of every update.
 
+    ``torch_threads``: torch's CPU threads in this process (the policy's forward pass while
+    the simulations step). ``update_threads``: threads for the synchronous PPO update
+    (``policy_lag=0``), which runs while every simulation waits, so it can take all the
+    cores; ``None`` keeps ``torch_threads``. With ``policy_lag=1`` the update overlaps the
+    rollout and runs on ``torch_threads``.
+
     ``verbose``: let RSL-RL print its model summary and per-iteration console block.
     """
     import torch
@@ -183,6 +195,15 @@ def train(
 
     _check_budget(iterations, minutes)
     check_policy_lag(policy_lag)
+    _check_threads("torch_threads", torch_threads)
+    if update_threads is not None:
+        _check_threads("update_threads", update_threads)
+        if policy_lag and update_threads != torch_threads:
+            raise ValueError(
+                f"update_threads={update_threads} with policy_lag={policy_lag}: the overlapped "
+                f"update shares the process with the rollout; expected None or torch_threads"
+            )
+    update_threads = update_threads or torch_threads
     torch.set_num_threads(torch_threads)
     torch.manual_seed(seed)
     np.random.seed(seed)
@@ -308,7 +329,11 @@ def train(
                     errors = collect()
                     collect_end = time.perf_counter()
                     behavior.swap_storage(alg)
-                    loss_dict = alg.update()
+                    torch.set_num_threads(update_threads)
+                    try:
+                        loss_dict = alg.update()
+                    finally:
+                        torch.set_num_threads(torch_threads)
                     learn_s = time.perf_counter() - collect_end
                 lag = it - rollout_version
                 if not 0 <= lag <= policy_lag:
