@@ -228,6 +228,7 @@ class Go1VelocityTask(MujocoTask):
         weights = dataclasses.asdict(self.weights)
         self._term_weights = np.array([weights[n] for n in REWARD_TERMS]) * self.control_dt
         self._active_terms = [(i, n) for i, n in enumerate(REWARD_TERMS) if weights[n] != 0]
+        self._slip_on = weights["feet_slip"] != 0  # skip the foot-velocity work when off
         self._raw = np.zeros(len(REWARD_TERMS))
         self._weighted = np.zeros(len(REWARD_TERMS))
         self._episode_sum = np.zeros(len(REWARD_TERMS))
@@ -410,7 +411,7 @@ class Go1VelocityTask(MujocoTask):
         raw[7] = posture @ posture
         raw[8] = torque @ torque
         raw[9] = self._air_time_term(math.hypot(cmd_x, cmd_y) > 0.1)
-        raw[10] = self._slip_term()
+        raw[10] = self._slip_term() if self._slip_on else 0.0
         return raw
 
     def _slip_term(self) -> float:
