@@ -11,14 +11,15 @@ and ``time_to_walk.png`` (commands passed and worst MSE against wall clock, one 
 
     python benchmarks/time_to_walk.py --configs serial:32:0:48:5:1 ray:32:0 --seeds 0 1
     python benchmarks/time_to_walk.py --evaluate-only      # re-check the runs already there
-    python benchmarks/time_to_walk.py --configs ray:32:0:48 --keep   # add to earlier results
+    python benchmarks/time_to_walk.py --configs ray:32:0:48 --seeds 2 --keep   # add a seed
 
 A configuration is as in ``train_throughput.py``
 (``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``);
 ``serial:32:0:48:5:1`` is the README's former training command (serial, synchronous, 5 ms
 physics, a 1-thread update), ``ray:32:0:48`` the new default of ``chronogym train quadruped``.
-``--keep`` keeps the results of configurations already in ``--out`` that this invocation does
-not run (each keeps its own settings and machine record).
+``--keep`` keeps the runs (configuration and seed) already in ``--out`` that this invocation
+does not run; a configuration's settings then list every seed it has, and its earlier machine
+record stays in ``earlier_machines``.
 """
 
 from __future__ import annotations
@@ -105,11 +106,17 @@ def evaluate_run(run: Path, criterion: Any, config: str) -> list[dict[str, Any]]
 
 def plot(rows: list[dict[str, Any]], criterion: Any, path: Path) -> None:
     fig, (left, right) = pyplot().subplots(1, 2, figsize=(12, 4.2))
+    configs = list(dict.fromkeys(r["config"] for r in rows))
+    colors = pyplot().get_cmap("tab10")
+    styles = ("-", "--", ":", "-.", (0, (6, 2, 1, 2, 1, 2)))  # colour: config; style: seed
     for run in dict.fromkeys(r["run"] for r in rows):
         mine = [r for r in rows if r["run"] == run]
         minutes = [r["wall_time"] / 60 for r in mine]
-        left.plot(minutes, [r["commands_passed"] for r in mine], marker=".", label=run)
-        right.plot(minutes, [r["worst_mse"] for r in mine], marker=".", label=run)
+        color = colors(configs.index(mine[0]["config"]) % 10)
+        style = styles[int(mine[0]["seed"]) % len(styles)]
+        for axis, key in ((left, "commands_passed"), (right, "worst_mse")):
+            values = [r[key] for r in mine]
+            axis.plot(minutes, values, marker=".", color=color, ls=style, label=run)
     left.set_ylabel(f"commands passed (of {len(criterion.commands)})")
     right.set_ylabel("worst episode-mean x/y velocity MSE (m/s)²")
     right.axhline(criterion.max_x_mse, color="k", lw=0.8, ls="--")
@@ -133,7 +140,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--max-mse", type=float, default=0.01, help="(m/s)², x and y")
     parser.add_argument("--evaluate-only", action="store_true")
     parser.add_argument(
-        "--keep", action="store_true", help="keep earlier results of configurations not run now"
+        "--keep", action="store_true", help="keep earlier runs (config and seed) not run now"
     )
     parser.add_argument("--runs", type=Path, default=RUNS)
     parser.add_argument("--out", type=Path, default=OUT)
@@ -164,7 +171,7 @@ def main(argv: list[str] | None = None) -> None:
             "env_steps": walked[0]["env_steps"] if walked else None,
             "trained_min": checkpoints(args.runs / run_name(config, seed))[-1][1] / 60,
         })  # fmt: skip
-    earlier = load_earlier(args.out, args.configs) if args.keep else {"rows": [], "runs": []}
+    earlier = load_earlier(args.out, set(runs)) if args.keep else {"rows": [], "runs": []}
     rows = earlier["rows"] + rows
     summary = earlier["runs"] + summary
     configs = list(dict.fromkeys([s["config"] for s in summary]))
@@ -185,7 +192,7 @@ def main(argv: list[str] | None = None) -> None:
     record = {
         **header("time_to_walk", "torch", "rsl-rl-lib"),
         "settings": {**earlier.get("settings", {}),
-                     **{config: {**settings(args), "ppo": ppo_settings()}
+                     **{config: merged_settings(args, earlier.get("settings", {}).get(config))
                         for config in args.configs}},
         "criterion": {"max_x_mse": criterion.max_x_mse, "max_y_mse": criterion.max_y_mse,
                       "episodes": criterion.episodes, "commands": criterion.commands},
@@ -206,19 +213,30 @@ def ppo_settings() -> dict[str, Any]:
     return {**cfg["algorithm"], "init_std": cfg["actor"]["distribution_cfg"]["init_std"]}
 
 
-def load_earlier(out: Path, running: list[str]) -> dict[str, Any]:
-    """The rows, run summaries, settings and machine records in ``out`` of the configurations
-    that are not in ``running``."""
+def merged_settings(args: argparse.Namespace, earlier: dict[str, Any] | None) -> dict[str, Any]:
+    """This invocation's settings of a configuration, with the seeds of its earlier kept runs."""
+    current = {**settings(args), "ppo": ppo_settings()}
+    if earlier:
+        current["seeds"] = sorted(set(earlier.get("seeds", [])) | set(args.seeds))
+        if earlier.get("note"):
+            current["note"] = earlier["note"]
+    return current
+
+
+def load_earlier(out: Path, running: set[tuple[str, int]]) -> dict[str, Any]:
+    """The rows, run summaries, settings and machine records in ``out`` of the runs
+    (configuration, seed) that are not in ``running``."""
     path = out / "time_to_walk.json"
     if not path.exists():
         return {"rows": [], "runs": []}
     import json
 
     record = json.loads(path.read_text())
-    kept = [r for r in record.get("runs", []) if r["config"] not in running]
+    kept = [r for r in record.get("runs", []) if (r["config"], int(r["seed"])) not in running]
     names = {r["config"] for r in kept}
+    pairs = {(r["config"], str(r["seed"])) for r in kept}
     with (out / "time_to_walk.csv").open(newline="") as handle:
-        rows = [r for r in csv.DictReader(handle) if r["config"] in names]
+        rows = [r for r in csv.DictReader(handle) if (r["config"], r["seed"]) in pairs]
     for row in rows:  # CSV text back to numbers
         for key in ("seed", "iteration", "env_steps", "commands_passed"):
             row[key] = int(row[key])

@@ -239,6 +239,24 @@ def test_commands_come_from_the_configured_ranges():
         env.reset(options={"command": (1.0, 2.0)})
 
 
+def test_commands_are_resampled_at_the_interval_unless_fixed():
+    ranges = CommandRanges(resample_s=0.06)  # every 3 decisions of 20 ms
+    env = SimEnv(Go1VelocityTask(commands=ranges))
+    env.reset(seed=0)
+    seen = [env.task.command.copy()]
+    for _ in range(7):
+        env.step(np.zeros(12, dtype=np.float32))
+        seen.append(env.task.command.copy())
+    changes = [i for i in range(1, 8) if not np.array_equal(seen[i], seen[i - 1])]
+    assert changes == [3, 6]
+    assert all(-0.5 <= c[0] <= 1.0 and -0.3 <= c[1] <= 0.3 for c in seen)
+    env.reset(seed=0, options={"command": COMMAND})
+    for _ in range(7):
+        env.step(np.zeros(12, dtype=np.float32))
+    assert tuple(env.task.command) == COMMAND
+    assert CommandRanges().resample_s is None
+
+
 def test_domain_randomization_is_off_by_default_and_stays_in_range():
     plain = _env()
     floor = plain.task.model.geom("floor").id
@@ -299,6 +317,8 @@ def test_servo_gains_can_be_overridden():
 def test_bad_config_values_name_the_field():
     with pytest.raises(ValueError, match="vx"):
         CommandRanges(vx=(1.0, -1.0))
+    with pytest.raises(ValueError, match="resample_s=0"):
+        CommandRanges(resample_s=0)
     with pytest.raises(ValueError, match="torques"):
         RewardWeights(torques=float("inf"))
     with pytest.raises(ValueError, match="friction"):

@@ -41,15 +41,29 @@ def _check_range(name: str, bounds: tuple[float, float]) -> None:
 
 @dataclass(frozen=True)
 class CommandRanges:
-    """Uniform ranges the velocity command is drawn from at each reset (body frame)."""
+    """Uniform ranges the velocity command is drawn from at each reset (body frame).
+
+    ``resample_s``: draw a new command every this many seconds of an episode (as legged_gym
+    does), so an episode holds several speed changes; ``None`` keeps one command per episode.
+    A command fixed by ``reset(options={"command": ...})`` is never resampled.
+    """
 
     vx: tuple[float, float] = (-0.5, 1.0)  # m/s, forward
     vy: tuple[float, float] = (-0.3, 0.3)  # m/s, left
     yaw_rate: tuple[float, float] = (-0.5, 0.5)  # rad/s
+    resample_s: float | None = None
 
     def __post_init__(self) -> None:
-        for field in dataclasses.fields(self):
-            _check_range(field.name, getattr(self, field.name))
+        for name in ("vx", "vy", "yaw_rate"):
+            _check_range(name, getattr(self, name))
+        value = self.resample_s
+        if value is not None and (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+            or value <= 0
+        ):
+            raise ValueError(f"resample_s={value!r}: expected None or seconds > 0")
 
 
 @dataclass(frozen=True)

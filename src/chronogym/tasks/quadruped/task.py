@@ -234,6 +234,7 @@ class Go1VelocityTask(MujocoTask):
         self._episode_sum = np.zeros(len(REWARD_TERMS))
         self._action_change = np.zeros(ACTION_DIM)
         self._steps = 0
+        self._next_command: int | None = None
         self._fell = False
         self._base_contact = False
 
@@ -273,7 +274,10 @@ class Go1VelocityTask(MujocoTask):
         if noise > 0:
             data.qpos[7:] = DEFAULT_JOINT_POS + rng.uniform(-noise, noise, size=ACTION_DIM)
         data.ctrl[:] = DEFAULT_JOINT_POS
-        self.command = self._draw_command(rng, options.get("command"))
+        fixed = options.get("command")
+        self.command = self._draw_command(rng, fixed)
+        self._command_rng = rng
+        self._next_command = None if fixed is not None else self._resample_interval_steps()
         self.last_action[:] = 0.0
         self.prev_action[:] = 0.0
         self.feet_air_time[:] = 0.0
@@ -316,6 +320,10 @@ class Go1VelocityTask(MujocoTask):
                 *dr.added_base_mass
             )
 
+    def _resample_interval_steps(self) -> int | None:
+        seconds = self.commands.resample_s
+        return None if seconds is None else max(1, round(seconds / self.control_dt))
+
     def _push_interval_steps(self) -> int | None:
         dr = self.randomization
         if dr is None or dr.push_interval_s is None:
@@ -333,6 +341,9 @@ class Go1VelocityTask(MujocoTask):
             kick = self._push_rng.uniform(-1.0, 1.0, size=2) * self.randomization.push_velocity
             self.data.qvel[0:2] += kick
             self._next_push += self._push_interval_steps()
+        if self._next_command is not None and self._steps >= self._next_command:
+            self.command = self._draw_command(self._command_rng, None)
+            self._next_command += self._resample_interval_steps()
 
     def observe(self) -> np.ndarray:
         import mujoco
