@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from common import RESULTS, Column, header, settings, table, write_json
@@ -24,7 +26,9 @@ OUT = RESULTS / "tracking_transient.json"
 DEFAULT_COMMANDS = ((1.0, 0.0, 0.0), (0.5, 0.0, 0.0))
 
 
-def episode_errors(env, policy, command, seed: int) -> np.ndarray:
+def episode_errors(
+    env: Any, policy: Callable[[np.ndarray], np.ndarray], command: tuple[float, ...], seed: int
+) -> np.ndarray:
     """x-velocity error (body frame) of every decision of one episode."""
     obs, _ = env.reset(seed=seed, options={"command": tuple(command)})
     task = env.unwrapped.task

@@ -276,7 +276,6 @@ class Go1VelocityTask(MujocoTask):
         data.ctrl[:] = DEFAULT_JOINT_POS
         fixed = options.get("command")
         self.command = self._draw_command(rng, fixed)
-        self._command_rng = rng
         self._next_command = None if fixed is not None else self._resample_interval_steps()
         self.last_action[:] = 0.0
         self.prev_action[:] = 0.0
@@ -288,7 +287,7 @@ class Go1VelocityTask(MujocoTask):
         self._steps = 0
         self._fell = False
         self._base_contact = False
-        self._push_rng = rng
+        self._episode_rng = rng  # pushes and resampled commands draw from it
         self._next_push = self._push_interval_steps()
         self.forward()
         self._feet_xy = self.data.geom_xpos[self._foot_geoms, :2]
@@ -338,11 +337,11 @@ class Go1VelocityTask(MujocoTask):
         self.data.ctrl[:] = DEFAULT_JOINT_POS + self.action_scale * self.last_action
         self._steps += 1
         if self._next_push is not None and self._steps >= self._next_push:
-            kick = self._push_rng.uniform(-1.0, 1.0, size=2) * self.randomization.push_velocity
+            kick = self._episode_rng.uniform(-1.0, 1.0, size=2) * self.randomization.push_velocity
             self.data.qvel[0:2] += kick
             self._next_push += self._push_interval_steps()
         if self._next_command is not None and self._steps >= self._next_command:
-            self.command = self._draw_command(self._command_rng, None)
+            self.command = self._draw_command(self._episode_rng, None)
             self._next_command += self._resample_interval_steps()
 
     def observe(self) -> np.ndarray:
