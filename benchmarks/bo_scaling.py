@@ -14,6 +14,9 @@ is the worst of the final best values of all constant-liar runs, so every run re
     python benchmarks/bo_scaling.py --quick          # smoke run
     python benchmarks/bo_scaling.py --terrain rigid rough --seeds 3 --address auto
     python benchmarks/bo_scaling.py --terrain soil   # SCM soil: ~2 s a landing (rigid ~0.3 s)
+    python benchmarks/bo_scaling.py --engine chrono --terrain scm --workers 1 2 --seeds 1 \
+        --trials 16 --skip-liar-check --out-dir benchmarks/results/bo_scaling_chrono_scm
+        # Chrono's SCMTerrain (needs PyChrono with its vehicle module): ~16 s a landing
 """
 
 from __future__ import annotations
@@ -59,13 +62,14 @@ class Run:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    from chronogym.optim.lander import TERRAINS
+    from chronogym.optim.lander import ENGINES, TERRAINS
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4, 8])
     parser.add_argument("--trials", type=int, default=48, help="trial budget of every run")
     parser.add_argument("--seeds", type=int, default=2, help="repetitions per level")
     parser.add_argument("--terrain", nargs="+", default=["rigid"], choices=list(TERRAINS))
+    parser.add_argument("--engine", default="mujoco", choices=list(ENGINES))
     parser.add_argument("--startup-trials", type=int, default=10)
     parser.add_argument("--skip-liar-check", action="store_true")
     parser.add_argument("--quick", action="store_true", help="smoke run (about a minute)")
@@ -76,6 +80,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         args.workers, args.trials, args.seeds, args.startup_trials = [1, 2], 12, 1, 4
     if min(args.workers) < 1 or args.trials < 2 or args.seeds < 1:
         parser.error("expected --workers >= 1, --trials >= 2 and --seeds >= 1")
+    from chronogym.optim.lander import check_engine
+
+    for terrain in args.terrain:
+        try:
+            check_engine(args.engine, terrain)
+        except (ValueError, ModuleNotFoundError) as exc:
+            parser.error(str(exc))
     return args
 
 
@@ -93,7 +104,7 @@ def run_once(terrain: str, workers: int, seed: int, liar: bool, args: argparse.N
     report = run_parallel_study(
         study,
         suggest_lander_design,
-        LanderObjective(terrain=terrain, seed=0),
+        LanderObjective(terrain=terrain, seed=0, engine=args.engine),
         args.trials,
         workers=workers,
         address=args.address,

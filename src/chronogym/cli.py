@@ -134,7 +134,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     for name in ("workers", "trials"):
         if getattr(args, name) < 1:
             raise SystemExit(f"--{name}={getattr(args, name)}: expected an integer >= 1")
-    try:  # engine checks (Chrono: rigid terrain, PyChrono installed) before Ray starts
+    try:  # engine checks (terrain of the engine, PyChrono installed) before Ray starts
         objective = LanderObjective(terrain=args.terrain, seed=args.seed, engine=args.engine)
     except (ValueError, ModuleNotFoundError) as exc:
         raise SystemExit(f"chronogym optimize lander: {exc}") from None
@@ -235,9 +235,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         )
     if args.resume is not None and not os.path.isfile(args.resume):
         raise SystemExit(f"--resume={args.resume}: no such checkpoint file")
+    _check_quadruped_engine("train", args)
     print(
         f"chronogym train quadruped: {args.num_envs} envs on the {args.backend} backend, "
-        f"{args.terrain} terrain, writing to {args.out}"
+        f"{args.terrain} terrain, {args.engine}, writing to {args.out}"
         + (f", resuming {args.resume}" if args.resume else "")
     )
     result = train_quadruped(
@@ -255,6 +256,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         torch_threads=args.torch_threads,
         policy_lag=args.policy_lag,
         update_threads=args.update_threads,
+        engine=args.engine,
     )
     row = result.last_row
     print(
@@ -286,6 +288,7 @@ def cmd_play(args: argparse.Namespace) -> int:
         raise SystemExit(f"--video-seconds={args.video_seconds}: expected a number > 0")
     if args.video and os.path.splitext(args.video)[1].lower() not in (".mp4", ".gif", ".png"):
         raise SystemExit(f"--video={args.video}: expected a .mp4, .gif or .png path")
+    _check_quadruped_engine("play", args)
     commands = [tuple(c) for c in args.command] if args.command else None
     rows = play_quadruped(
         args.checkpoint,
@@ -296,11 +299,22 @@ def cmd_play(args: argparse.Namespace) -> int:
         terrain=args.terrain,
         max_episode_steps=args.steps,
         video_seconds=args.video_seconds,
+        engine=args.engine,
     )
     print(format_summary(rows))
     if args.video:
         print(f"video: {args.video}")
     return 0
+
+
+def _check_quadruped_engine(command: str, args: argparse.Namespace) -> None:
+    """Engine and terrain checks (Chrono: PyChrono installed) before anything starts."""
+    from chronogym.rl.quadruped import check_engine
+
+    try:
+        check_engine(args.engine, args.terrain)
+    except (ValueError, ModuleNotFoundError) as exc:
+        raise SystemExit(f"chronogym {command} quadruped: {exc}") from None
 
 
 def cmd_envs(args: argparse.Namespace) -> int:
@@ -312,6 +326,14 @@ def cmd_envs(args: argparse.Namespace) -> int:
     for env_id in sorted(i for i in gym.registry if i.startswith("chronogym/")):
         print(env_id)
     return 0
+
+
+QUADRUPED_ENGINES = ["mujoco", "chrono"]
+QUADRUPED_ENGINE_HELP = "physics engine (chrono: needs PyChrono; a MuJoCo checkpoint runs there)"
+QUADRUPED_TERRAINS = ["rigid", "soil", "scm"]
+QUADRUPED_TERRAIN_HELP = (
+    "rigid ground; soil: chronogym's SCM (engine mujoco); scm: Chrono's SCMTerrain (engine chrono)"
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -350,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--engine",
         default="mujoco",
         choices=list(LANDER_ENGINES),
-        help="physics engine (chrono: rigid terrain only, needs PyChrono)",
+        help="physics engine (mujoco: rigid, rough, soil; chrono: rigid, scm; needs PyChrono)",
     )
     opt.add_argument(
         "--study", default=None, help="study name (default lander-TERRAIN, +-chrono for Chrono)"
@@ -369,7 +391,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--minutes", type=float, default=None, help="wall-clock budget")
     tr.add_argument("--out", default="runs/quadruped", help="logs, CSV and checkpoints")
     tr.add_argument("--resume", default=None, help="checkpoint to continue from")
-    tr.add_argument("--terrain", default="rigid", choices=["rigid", "soil"])
+    tr.add_argument(
+        "--terrain", default="rigid", choices=QUADRUPED_TERRAINS, help=QUADRUPED_TERRAIN_HELP
+    )
+    tr.add_argument(
+        "--engine", default="mujoco", choices=QUADRUPED_ENGINES, help=QUADRUPED_ENGINE_HELP
+    )
     tr.add_argument("--finetune", action="store_true", help="conservative PPO (paper's transfer)")
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--envs-per-worker", type=int, default=None)
@@ -408,7 +435,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="a command to evaluate (repeatable; default: a standard set)",
     )
     play.add_argument("--steps", type=int, default=None, help="episode length in steps")
-    play.add_argument("--terrain", default="rigid", choices=["rigid", "soil"])
+    play.add_argument(
+        "--terrain", default="rigid", choices=QUADRUPED_TERRAINS, help=QUADRUPED_TERRAIN_HELP
+    )
+    play.add_argument(
+        "--engine", default="mujoco", choices=QUADRUPED_ENGINES, help=QUADRUPED_ENGINE_HELP
+    )
     play.add_argument("--seed", type=int, default=0)
     play.set_defaults(func=cmd_play)
     envs = sub.add_parser("envs", help="list registered environment ids")

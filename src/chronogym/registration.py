@@ -20,6 +20,7 @@ TASKS: dict[str, str] = {
 # ``gymnasium.make`` raises an error naming the missing package and how to install it.
 OPTIONAL_TASKS: dict[str, str] = {
     "ChronoCartPole-v0": "chronogym.tasks.cartpole.chrono:ChronoCartPoleTask",  # pychrono
+    "ChronoGo1Velocity-v0": "chronogym.tasks.quadruped.chrono_task:ChronoGo1VelocityTask",
 }
 
 

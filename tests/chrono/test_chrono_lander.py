@@ -18,6 +18,7 @@ import numpy as np
 import optuna
 import pytest
 
+from chronogym.engines.mujoco import gl_unavailable
 from chronogym.optim import open_storage, run_parallel_study
 from chronogym.optim.lander import LanderObjective, suggest_lander_design
 from chronogym.tasks.lander import DEFAULT_DESIGN, LanderParams, LanderSim, Terrain
@@ -199,11 +200,17 @@ def test_stops_engage_beyond_a_stop_only_when_they_push_back():
 def test_chrono_lander_refuses_other_terrains_naming_what_it_supports():
     from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
 
-    for terrain in (Terrain(slope=0.1), Terrain(n_rocks=3), Terrain(soil="mars")):
-        with pytest.raises(ValueError, match=r"supports flat rigid ground, Terrain\(\)"):
+    for terrain in (Terrain(slope=0.1), Terrain(n_rocks=3)):
+        with pytest.raises(ValueError, match=r"supports flat ground, rigid or SCM soil"):
             ChronoLanderSim(terrain=terrain)
-    with pytest.raises(ValueError, match=r"engine='chrono' supports terrain='rigid' only"):
+    with pytest.raises(
+        ValueError,
+        match=r"engine='chrono' supports terrain in \['rigid', 'scm'\]; got "
+        r"terrain='soil' \(use engine='mujoco' for it\)",
+    ):
         LanderObjective(terrain="soil", engine="chrono")
+    with pytest.raises(ValueError, match=r"engine='mujoco' supports .*got terrain='scm' \(use "):
+        LanderObjective(terrain="scm", engine="mujoco")
     with pytest.raises(ValueError, match=r"engine='bullet': expected one of"):
         LanderObjective(engine="bullet")
 
@@ -262,3 +269,21 @@ def test_importing_chronogym_never_imports_pychrono():
     )
     assert result.returncode == 0, result.stderr
     assert "pychrono not imported" in result.stdout
+
+
+@pytest.mark.skipif(
+    gl_unavailable() is not None,
+    reason="no offscreen OpenGL (EGL or OSMesa)",
+)
+def test_chrono_lander_is_drawn_with_the_mujoco_model_of_its_design(chrono):
+    from chronogym.tasks.lander import LanderSim
+    from chronogym.tasks.lander.chrono.sim import ChronoLanderSim
+
+    chrono_sim, mujoco_sim = ChronoLanderSim(), LanderSim()
+    start = chrono_sim.render()
+    assert start.shape == (360, 480, 3) and start.std() > 5.0
+    # the same touchdown pose in both engines: the same picture
+    assert np.abs(start.astype(int) - mujoco_sim.render().astype(int)).mean() < 0.5
+    for _ in range(800):  # 0.2 s: the lander moves down and its legs compress
+        chrono_sim.step()
+    assert np.abs(chrono_sim.render().astype(int) - start.astype(int)).mean() > 0.5

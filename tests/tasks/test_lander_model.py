@@ -342,3 +342,18 @@ def test_terrain_validation() -> None:
         Terrain(slope=math.radians(45.0))
     with pytest.raises(ValueError, match="n_rocks"):
         Terrain(n_rocks=-1)
+
+
+@pytest.mark.skipif(
+    __import__("chronogym.engines.mujoco", fromlist=["gl_unavailable"]).gl_unavailable()
+    is not None,
+    reason="no offscreen OpenGL (EGL or OSMesa)",
+)
+def test_lander_renders_offscreen() -> None:
+    import numpy as np
+
+    from chronogym.tasks.lander import LanderSim
+
+    sim = LanderSim()
+    frame = sim.render(width=160, height=120)
+    assert frame.shape == (120, 160, 3) and frame.dtype == np.uint8 and frame.std() > 5.0

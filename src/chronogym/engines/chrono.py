@@ -104,6 +104,18 @@ def quat(q: Any) -> np.ndarray:
     return np.array([q.e0, q.e1, q.e2, q.e3], dtype=np.float64)
 
 
+def quat_matrix(q: np.ndarray) -> np.ndarray:
+    """The 3x3 rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = (float(c) for c in q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
 def rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Express the world vector ``v`` in the frame of the unit quaternion ``q`` (w, x, y, z)."""
     w, u = q[0], -q[1:]
@@ -144,14 +156,24 @@ def system_bodies(system: Any) -> list[Any]:
 # --- writing state ---------------------------------------------------------------------------
 
 
-def _vector(values: Iterable[float]) -> Any:
+def chrono_vector(values: Iterable[float]) -> Any:
+    """A Chrono vector (``ChVector3d``) of three floats."""
     x, y, z = (float(c) for c in values)
     return probe(import_pychrono(), VECTOR_TYPES)(x, y, z)
 
 
-def _quaternion(values: Iterable[float]) -> Any:
+def chrono_quaternion(values: Iterable[float]) -> Any:
+    """A Chrono quaternion (``ChQuaterniond``) of (w, x, y, z)."""
     w, x, y, z = (float(c) for c in values)
     return probe(import_pychrono(), QUATERNION_TYPES)(w, x, y, z)
+
+
+def chrono_frame(pos: Iterable[float], rot: Iterable[float]) -> Any:
+    """A Chrono frame (``ChFramed``) at ``pos`` with orientation ``rot`` (w, x, y, z)."""
+    return import_pychrono().ChFramed(chrono_vector(pos), chrono_quaternion(rot))
+
+
+_vector, _quaternion = chrono_vector, chrono_quaternion
 
 
 def set_body_state(

@@ -28,45 +28,58 @@ LANDER_METRICS = (
 #: soil takes 4324 J of the 7568 J released; ``"lete_sand"`` would be nearly rigid (1.1 cm).
 SOIL_PRESET = "mars"
 
-TERRAINS = ("rigid", "rough", "soil")
+TERRAINS = ("rigid", "rough", "soil", "scm")
 
-#: Physics engines of the lander: MuJoCo (``LanderSim``, every terrain) and Project Chrono
-#: (``ChronoLanderSim``, rigid flat ground only; needs PyChrono).
+#: Physics engines of the lander: MuJoCo (``LanderSim``) and Project Chrono
+#: (``ChronoLanderSim``; needs PyChrono).
 ENGINES = ("mujoco", "chrono")
+#: Terrains per engine: ``soil`` is chronogym's SCM under MuJoCo bodies, ``scm`` Chrono's own
+#: ``SCMTerrain`` (PyChrono's vehicle module), both on :data:`SOIL_PRESET`.
+ENGINE_TERRAINS: dict[str, tuple[str, ...]] = {
+    "mujoco": ("rigid", "rough", "soil"),
+    "chrono": ("rigid", "scm"),
+}
 
 
 def check_engine(engine: str, terrain: str) -> None:
     """Raise before any worker starts if ``engine`` cannot run on ``terrain`` here.
 
-    ``chrono`` needs flat rigid ground and an importable PyChrono (imported here, in the
-    driver, so a missing install is one clear error instead of a failed trial per worker).
+    ``chrono`` needs an importable PyChrono, with its vehicle module for ``scm`` (imported
+    here, in the driver, so a missing install is one clear error instead of a failed trial
+    per worker).
     """
     if engine not in ENGINES:
         raise ValueError(f"engine={engine!r}: expected one of {list(ENGINES)}")
+    if terrain not in ENGINE_TERRAINS[engine]:
+        other = next(e for e, ts in ENGINE_TERRAINS.items() if terrain in ts)
+        raise ValueError(
+            f"engine={engine!r} supports terrain in {list(ENGINE_TERRAINS[engine])}; got "
+            f"terrain={terrain!r} (use engine={other!r} for it)"
+        )
     if engine != "chrono":
         return
-    if terrain != "rigid":
-        raise ValueError(
-            f"engine='chrono' supports terrain='rigid' only (flat rigid ground); got "
-            f"terrain={terrain!r} (use engine='mujoco' for rough ground and soil)"
-        )
     from chronogym.engines.chrono import import_pychrono
+    from chronogym.engines.chrono_scm import import_chrono_vehicle
 
     try:
         import_pychrono()
+        if terrain == "scm":
+            import_chrono_vehicle()
     except ModuleNotFoundError as exc:
-        raise ModuleNotFoundError(f"engine='chrono': {exc}", name="pychrono") from exc
+        raise ModuleNotFoundError(f"engine='chrono': {exc}", name=exc.name) from exc
 
 
 def make_terrain(name: str) -> Any:
-    """Terrain preset by name: ``rigid`` (flat), ``rough`` (8 deg slope, 12 rocks) or ``soil``
-    (flat SCM soil, :data:`SOIL_PRESET`; the lander then steps at ``soil_timestep``)."""
+    """Terrain preset by name: ``rigid`` (flat), ``rough`` (8 deg slope, 12 rocks), ``soil`` or
+    ``scm`` (flat SCM soil, :data:`SOIL_PRESET`, in MuJoCo or in Chrono; the lander then steps
+    at ``soil_timestep``)."""
     from chronogym.tasks.lander import Terrain
 
     presets = {
         "rigid": lambda: Terrain(),
         "rough": lambda: Terrain(slope=math.radians(8.0), n_rocks=12),
         "soil": lambda: Terrain(soil=SOIL_PRESET),
+        "scm": lambda: Terrain(soil=SOIL_PRESET),
     }
     if name not in presets:
         raise ValueError(f"terrain={name!r}: expected one of {list(TERRAINS)}")
@@ -130,7 +143,7 @@ class LanderEvaluator:
 class LanderObjective:
     """Picklable factory of :class:`LanderEvaluator`, sent to each worker.
 
-    ``engine="chrono"`` evaluates the designs in Project Chrono (rigid terrain only); the
+    ``engine="chrono"`` evaluates the designs in Project Chrono (``rigid`` or ``scm``); the
     checks of :func:`check_engine` run here, in the driver, before any worker starts.
     """
 

@@ -67,14 +67,18 @@ def run_episode(
             recorder.add(env.render, step)
         if terminated or truncated:
             break
+    # The task logs its episode metrics when its own horizon ends the episode; a shorter
+    # TimeLimit (``gym.make(..., max_episode_steps=N)``) ends it first: same errors from here.
     log = info.get("log", {})
+    x_mse = float(np.mean((np.asarray(vx) - float(command[0])) ** 2))
+    y_mse = float(np.mean((np.asarray(vy) - float(command[1])) ** 2))
     return EpisodeResult(
         command=tuple(float(c) for c in command),  # type: ignore[arg-type]
         seed=seed,
         survived=bool(truncated and not terminated),
         length_s=float(log.get("/metrics/episode_length_s", len(vx) * task.control_dt)),
-        x_vel_mse=float(log.get("/metrics/x_vel_mse", math.nan)),
-        y_vel_mse=float(log.get("/metrics/y_vel_mse", math.nan)),
+        x_vel_mse=float(log.get("/metrics/x_vel_mse", x_mse)),
+        y_vel_mse=float(log.get("/metrics/y_vel_mse", y_mse)),
         mean_vx=float(np.mean(vx)),
         mean_vy=float(np.mean(vy)),
         episode_return=total,

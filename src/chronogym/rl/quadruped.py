@@ -12,6 +12,13 @@ from typing import Any
 ENV_ID = "chronogym/Go1Velocity-v0"
 TERRAINS = ("rigid", "soil")
 BACKENDS = ("ray", "serial")
+#: Gymnasium id of the Go1 task per engine; both share observation, action and reward.
+ENV_IDS: dict[str, str] = {
+    "mujoco": ENV_ID,
+    "chrono": "chronogym/ChronoGo1Velocity-v0",
+}
+#: Terrains of the Go1 task per engine.
+ENGINE_TERRAINS: dict[str, tuple[str, ...]] = {"mujoco": TERRAINS, "chrono": ("rigid", "scm")}
 
 
 #: PPO settings of the documented Go1 run, on top of :func:`ppo_train_config`'s legged_gym
@@ -39,11 +46,33 @@ def quadruped_train_config(**overrides: Any) -> dict[str, Any]:
     return _merge(ppo_train_config(**QUADRUPED_PPO), overrides)
 
 
-def env_kwargs_for(terrain: str, task_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+def check_engine(engine: str, terrain: str = "rigid") -> str:
+    """The Gymnasium id for ``engine``, after checking that it runs ``terrain`` and, for
+    Chrono, that PyChrono imports (ValueError / ModuleNotFoundError naming what to do)."""
+    if engine not in ENV_IDS:
+        raise ValueError(f"engine={engine!r}: expected one of {', '.join(ENV_IDS)}")
+    terrains = ENGINE_TERRAINS[engine]
+    if terrain not in terrains:
+        others = [e for e, ts in ENGINE_TERRAINS.items() if terrain in ts]
+        hint = f" (terrain {terrain!r} runs on engine {others[0]!r})" if others else ""
+        raise ValueError(
+            f"terrain={terrain!r}: expected one of {', '.join(terrains)} on engine {engine!r}{hint}"
+        )
+    if engine == "chrono":
+        from chronogym.engines.chrono import import_pychrono
+
+        import_pychrono()
+    return ENV_IDS[engine]
+
+
+def env_kwargs_for(
+    terrain: str, task_kwargs: dict[str, Any] | None = None, engine: str = "mujoco"
+) -> dict[str, Any]:
     """Keyword arguments of the task for a terrain name, plus ``task_kwargs`` (other
     ``Go1VelocityTask`` arguments, e.g. ``{"dt": 0.005, "k": 4}``)."""
-    if terrain not in TERRAINS:
-        raise ValueError(f"terrain={terrain!r}: expected one of {TERRAINS}")
+    terrains = ENGINE_TERRAINS.get(engine, TERRAINS)
+    if terrain not in terrains:
+        raise ValueError(f"terrain={terrain!r}: expected one of {terrains} on engine {engine!r}")
     extra = dict(task_kwargs or {})
     if "terrain" in extra:
         raise ValueError(
@@ -60,11 +89,12 @@ def make_quadruped_vec_env(
     envs_per_worker: int | None = None,
     address: str | None = None,
     task_kwargs: dict[str, Any] | None = None,
+    engine: str = "mujoco",
     **vector_kwargs: Any,
 ) -> Any:
     """``num_envs`` Go1 envs batched by ``backend`` ("ray" or "serial", the no-Ray baseline),
     with Gymnasium's SAME_STEP autoreset that RSL-RL needs; ``task_kwargs`` reach each
-    ``Go1VelocityTask``."""
+    ``Go1VelocityTask`` (``engine="chrono"``: each ``ChronoGo1VelocityTask``)."""
     import gymnasium as gym
 
     from chronogym.vector.factory import make_vec
@@ -73,14 +103,15 @@ def make_quadruped_vec_env(
         raise ValueError(f"backend={backend!r}: expected one of {BACKENDS}")
     if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs={num_envs!r}: expected an integer >= 1")
+    env_id = check_engine(engine, terrain)  # before any Ray worker starts
     kwargs: dict[str, Any] = {
         "autoreset_mode": gym.vector.AutoresetMode.SAME_STEP,
-        "env_kwargs": env_kwargs_for(terrain, task_kwargs),
+        "env_kwargs": env_kwargs_for(terrain, task_kwargs, engine),
         **vector_kwargs,
     }
     if backend == "ray":
         kwargs.update(envs_per_worker=envs_per_worker, address=address)
-    return make_vec(ENV_ID, num_envs, backend=backend, **kwargs)
+    return make_vec(env_id, num_envs, backend=backend, **kwargs)
 
 
 def train_quadruped(
@@ -102,6 +133,7 @@ def train_quadruped(
     policy_lag: int = 0,
     task_kwargs: dict[str, Any] | None = None,
     update_threads: int | None = None,
+    engine: str = "mujoco",
 ) -> Any:
     """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
 
@@ -111,7 +143,9 @@ def train_quadruped(
     the synchronous update, while the simulations wait (default: every CPU this process may
     use, at most 8; with ``policy_lag=1`` the update runs on ``torch_threads``).
     ``task_kwargs``: further ``Go1VelocityTask`` arguments (e.g. the physics step
-    ``{"dt": 0.005, "k": 4}``). Returns :class:`~chronogym.rl.TrainResult`.
+    ``{"dt": 0.005, "k": 4}``). ``engine="chrono"`` trains the same task in Project Chrono
+    (``chronogym/ChronoGo1Velocity-v0``; a MuJoCo checkpoint resumes there unchanged).
+    Returns :class:`~chronogym.rl.TrainResult`.
     """
     from chronogym.rl.config import FINETUNE_PPO
     from chronogym.rl.overlap import check_policy_lag
@@ -120,6 +154,7 @@ def train_quadruped(
 
     _check_budget(iterations, minutes)
     check_policy_lag(policy_lag)
+    check_engine(engine, terrain)
     if resume is not None and not Path(resume).is_file():
         raise FileNotFoundError(f"resume={str(resume)!r}: no such checkpoint file")
     if update_threads is None:
@@ -134,6 +169,7 @@ def train_quadruped(
         envs_per_worker=envs_per_worker,
         address=address,
         task_kwargs=task_kwargs,
+        engine=engine,
     )
     env = RslRlVecEnv(vec, seed=seed)
     try:
@@ -176,8 +212,13 @@ def play_quadruped(
     max_episode_steps: int | None = None,
     progress: bool = True,
     video_seconds: float = 5.0,
+    engine: str = "mujoco",
+    task_kwargs: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Roll the checkpoint's policy out for each command; return the summary rows.
+
+    ``engine="chrono"`` plays it in Project Chrono (sim-to-sim for a MuJoCo-trained policy);
+    the video then shows the Chrono robot's pose drawn with the MuJoCo model.
 
     With ``video`` the first ``video_seconds`` of the first episode of every command are
     rendered offscreen (needs an OpenGL backend: EGL, or OSMesa with ``MUJOCO_GL=osmesa``)
@@ -189,14 +230,15 @@ def play_quadruped(
     from chronogym.rl.evaluate import DEFAULT_COMMANDS, evaluate, summarize
     from chronogym.rl.trainer import load_policy
 
+    env_id = check_engine(engine, terrain)
     render_mode = "rgb_array" if video is not None else None
     if video is not None:
         check_can_render()
     env = gym.make(
-        ENV_ID,
+        env_id,
         render_mode=render_mode,
         max_episode_steps=max_episode_steps,
-        **env_kwargs_for(terrain),
+        **env_kwargs_for(terrain, task_kwargs, engine),
     )
     try:
         policy = load_policy(checkpoint, env.observation_space.shape[0], env.action_space.shape[0])

@@ -29,8 +29,8 @@ One sub-package per engine:
   topology) and ``sim`` (:class:`LanderSim` and :func:`simulate_landing`: metrics, and the
   energy ledger whose terms are :data:`LEDGER_TERMS`);
 * :mod:`~chronogym.tasks.lander.chrono` -- ``model``, ``struts`` and ``sim``: the same lander
-  in Project Chrono (:class:`ChronoLanderSim`, :class:`ChronoSettings`; flat rigid ground;
-  needs PyChrono, imported only when a Chrono lander is built).
+  in Project Chrono (:class:`ChronoLanderSim`, :class:`ChronoSettings`; flat ground, rigid or
+  Chrono's SCM soil; needs PyChrono, imported only when a Chrono lander is built).
 
 No Gymnasium, Ray, Optuna or PyChrono import here (``chronogym.terrain``, numba, on soil).
 """

@@ -3,7 +3,8 @@ or soil) and :func:`terrain_params` (the time step soil needs).
 
 Each engine builds what it supports: the MuJoCo model (:mod:`.mujoco.model`) the inclined
 plane, the rocks and (with ``chronogym.terrain.MujocoSoil``) the soil; the Chrono lander
-flat rigid ground only (:func:`.chrono.model.check_chrono_terrain`).
+flat ground, rigid or Chrono's own SCM soil with the same preset
+(:func:`.chrono.model.check_chrono_terrain`).
 """
 
 from __future__ import annotations

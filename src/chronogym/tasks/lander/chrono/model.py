@@ -27,7 +27,13 @@ as a ``ChSystemSMC``:
   for why and for the values.  Friction ``params.friction``.
 * **Integration**: Chrono's linearized implicit Euler (its default), direct sparse LU.
 
-Rigid, flat ground only (:func:`check_chrono_terrain`).
+Ground (:func:`check_chrono_terrain`): flat and rigid (a box), or Chrono's own SCM soil
+(``Terrain(soil=...)``: ``pychrono.vehicle.SCMTerrain`` with the same chronogym preset as the
+MuJoCo lander's soil, :class:`~chronogym.engines.chrono_scm.ChronoSCM`).  On soil each pad
+touches it with its cylinder (SCM finds the pads' collision shapes by ray casting, in a box
+around each pad), and there is no rigid ground.  The chassis is not on the soil: its cylinder
+would need an SCM domain of about 2 x 2 m (10^4 rays per tick at 2 cm); it starts 1.2 m up, and
+:class:`~.sim.ChronoLanderSim` raises if its lowest point reaches the soil surface.
 """
 
 from __future__ import annotations
@@ -56,7 +62,9 @@ __all__ = [
 ]
 
 #: The terrain the Chrono lander supports, in words (for error messages).
-CHRONO_TERRAIN = "flat rigid ground, Terrain() (slope 0, no rocks, no soil)"
+CHRONO_TERRAIN = (
+    "flat ground, rigid or SCM soil: Terrain() or Terrain(soil=...) (slope 0, no rocks)"
+)
 
 #: Body names, in the order of :attr:`ChronoLanderModel.bodies`.
 BODY_NAMES: tuple[str, ...] = (
@@ -131,12 +139,17 @@ class ChronoSettings:
     timestep: float | None = 0.00025
 
 
-def chrono_params(params: LanderParams, settings: ChronoSettings) -> LanderParams:
+def chrono_params(
+    params: LanderParams, settings: ChronoSettings, terrain: Terrain | None = None
+) -> LanderParams:
     """``params`` with the Chrono time step (``settings.timestep``; ``None`` keeps
-    ``params.timestep``)."""
-    if settings.timestep is None or settings.timestep == params.timestep:
+    ``params.timestep``); on soil at most ``params.soil_timestep``, as in MuJoCo."""
+    timestep = params.timestep if settings.timestep is None else float(settings.timestep)
+    if terrain is not None and terrain.soil is not None:
+        timestep = min(timestep, params.soil_timestep)
+    if timestep == params.timestep:
         return params
-    return dataclasses.replace(params, timestep=float(settings.timestep))
+    return dataclasses.replace(params, timestep=timestep)
 
 
 def check_chrono_terrain(terrain: Terrain | None) -> Terrain:
@@ -147,12 +160,10 @@ def check_chrono_terrain(terrain: Terrain | None) -> Terrain:
         unsupported.append(f"slope={terrain.slope!r}")
     if terrain.n_rocks:
         unsupported.append(f"n_rocks={terrain.n_rocks!r}")
-    if terrain.soil is not None:
-        unsupported.append(f"soil={terrain.soil!r}")
     if unsupported:
         raise ValueError(
             f"the Chrono lander supports {CHRONO_TERRAIN}; got {', '.join(unsupported)} "
-            "(use the MuJoCo lander, LanderSim, for slopes, rocks and soil)"
+            "(use the MuJoCo lander, LanderSim, for slopes and rocks)"
         )
     return terrain
 
@@ -172,6 +183,10 @@ class ChronoLanderModel:
     inertias: np.ndarray  # per body, principal moments [kg m^2] (Chrono body axes)
     timestep: float
     keep_alive: list[Any] = field(default_factory=list)  # links and material
+    soil: Any = None  # ChronoSCM on soil, else None
+    mujoco_model: Any = None  # the MuJoCo model of the same design (pictures)
+    chassis_shape: tuple[np.ndarray, float, float] = (np.zeros(3), 0.0, 0.0)
+    # (cylinder centre in the chassis frame, radius, half length)
 
     @property
     def chassis(self) -> Any:
@@ -238,8 +253,10 @@ def build_chrono_lander(
     ground.SetFixed(True)
     ground.SetMass(1e9)  # SMC uses m1 m2 / (m1 + m2): the pads' own mass against the ground
     ground.SetPos(chrono.ChVector3d(0.0, 0.0, -0.5))
-    ground.AddCollisionShape(chrono.ChCollisionShapeBox(material, 40.0, 40.0, 1.0))
-    ground.EnableCollision(True)
+    on_soil = terrain.soil is not None
+    if not on_soil:
+        ground.AddCollisionShape(chrono.ChCollisionShapeBox(material, 40.0, 40.0, 1.0))
+        ground.EnableCollision(True)
     system.AddBody(ground)
 
     bodies, masses, inertias = [], np.zeros(len(BODY_NAMES)), np.zeros((len(BODY_NAMES), 3))
@@ -254,7 +271,8 @@ def build_chrono_lander(
         body.SetRot(_quat(chrono, quat_from_axes(*d.ximat[b].reshape(3, 3).T)))
         system.AddBody(body)
         bodies.append(body)
-    _add_contact_shapes(chrono, bodies, info, d, material, settings)
+    pad_boxes = _add_contact_shapes(chrono, bodies, info, d, material, settings, on_soil)
+    soil = _add_soil(system, terrain, bodies, pad_boxes) if on_soil else None
 
     keep: list[Any] = [material]
     struts = []
@@ -271,6 +289,8 @@ def build_chrono_lander(
     upper = params.max_stroke + params.stop_margin
     stiffness, damping = stop_coefficients(params, settings.stop_time_constant)
     chassis_rot = d.ximat[info.chassis_body].reshape(3, 3)
+    g = info.chassis_geom
+    chassis_centre = chassis_rot.T @ (d.geom_xpos[g] - d.xipos[info.chassis_body])
     return ChronoLanderModel(
         system=system,
         ground=ground,
@@ -283,6 +303,9 @@ def build_chrono_lander(
         inertias=inertias,
         timestep=params.timestep,
         keep_alive=keep,
+        soil=soil,
+        mujoco_model=m,
+        chassis_shape=(chassis_centre, float(m.geom_size[g][0]), float(m.geom_size[g][1])),
     )
 
 
@@ -322,13 +345,18 @@ def _add_contact_shapes(
     data: mujoco.MjData,
     material: Any,
     settings: ChronoSettings,
-) -> None:
+    on_soil: bool = False,
+) -> list[tuple[Any, np.ndarray, np.ndarray]]:
     """The chassis cylinder, and on each pad a ring of small spheres along the rim of its
-    bottom face, where MuJoCo has the pad cylinders (see :class:`ChronoSettings`)."""
+    bottom face, where MuJoCo has the pad cylinders (see :class:`ChronoSettings`); on soil
+    the pad cylinder itself (the soil ray-casts it).  Returns each pad's SCM active domain:
+    ``(pad body, box centre, box size)`` in the pad's frame, the cylinder's bounding box
+    grown by 3 cm sideways and 15 cm up and down."""
     m = info.model
     geoms = {"chassis": info.chassis_geom}
     geoms.update({f"pad_{i}": int(g) for i, g in enumerate(info.pad_geoms)})
     identity = np.array([1.0, 0.0, 0.0, 0.0])
+    pad_boxes = []
     for body, name in zip(bodies, BODY_NAMES, strict=True):
         g = geoms.get(name)
         if g is None:
@@ -337,9 +365,12 @@ def _add_contact_shapes(
         pos = rot_b.T @ (data.geom_xpos[g] - data.xipos[m.body(name).id])  # in the body frame
         rot = rot_b.T @ data.geom_xmat[g].reshape(3, 3)
         radius, half = (float(x) for x in m.geom_size[g][:2])
-        if name == "chassis":
+        if name == "chassis" or on_soil:
             shape = chrono.ChCollisionShapeCylinder(material, radius, 2.0 * half)
             body.AddCollisionShape(shape, _frame(chrono, pos, quat_from_axes(*rot.T)))
+            if name != "chassis":
+                extent = np.array([radius + 0.03, radius + 0.03, half + 0.15])  # cylinder frame
+                pad_boxes.append((body, pos, 2.0 * np.abs(rot) @ extent))
         else:
             r, n = settings.pad_point_radius, settings.pad_points
             for phi in 2.0 * math.pi * np.arange(n) / n:
@@ -351,6 +382,22 @@ def _add_contact_shapes(
         model = body.GetCollisionModel()
         model.SetFamily(1)
         model.DisallowCollisionsWith(1)  # the lander never collides with itself
+    return pad_boxes
+
+
+def _add_soil(
+    system: Any,
+    terrain: Terrain,
+    bodies: list[Any],
+    pad_boxes: list[tuple[Any, np.ndarray, np.ndarray]],
+) -> Any:
+    """Chrono's SCM soil with the terrain's preset, active around each pad."""
+    from chronogym.engines.chrono_scm import ChronoSCM
+    from chronogym.terrain.params import soil_preset
+
+    params = soil_preset(terrain.soil) if isinstance(terrain.soil, str) else terrain.soil
+    side = float(terrain.soil_extent)
+    return ChronoSCM(system, params, (side, side), float(terrain.soil_resolution), pad_boxes)
 
 
 def _leg_links(

@@ -41,6 +41,7 @@ Energy balance (``metrics()["energy"]``, :meth:`ChronoLanderSim.energy_ledger`):
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -53,10 +54,12 @@ from chronogym.engines.chrono import (
     body_pos,
     body_rot,
     probe,
+    quat_matrix,
     set_body_state,
     vec3,
 )
 from chronogym.tasks.lander.chrono.model import (
+    BODY_NAMES,
     ChronoLanderModel,
     ChronoSettings,
     build_chrono_lander,
@@ -70,7 +73,7 @@ from chronogym.tasks.lander.terrain import Terrain
 __all__ = ["CHRONO_LEDGER_TERMS", "ChronoLanderSim", "simulate_chrono_landing"]
 
 #: Work booked per tick by :class:`ChronoLanderSim` [J] (see the module docstring).
-CHRONO_LEDGER_TERMS: tuple[str, ...] = ("absorbers", "joint_limits", "contact")
+CHRONO_LEDGER_TERMS: tuple[str, ...] = ("absorbers", "joint_limits", "contact", "soil")
 
 
 class ChronoLanderSim(Landing):
@@ -79,14 +82,17 @@ class ChronoLanderSim(Landing):
     Args:
         design: the design vector.
         params: fixed parameters (default :class:`LanderParams`); the time step is
-            ``settings.timestep`` (``self.params`` holds the one used).
-        terrain: flat rigid ground only (``None`` or ``Terrain()``); anything else is a
+            ``settings.timestep``, on soil at most ``params.soil_timestep`` (``self.params``
+            holds the one used).
+        terrain: flat ground (``None``, ``Terrain()`` or ``Terrain(soil=...)``: Chrono's SCM
+            soil under the pads, needs PyChrono's vehicle module); slopes and rocks are a
             ``ValueError`` naming what is supported.
         seed: accepted for the same signature as ``LanderSim`` (rocks); no effect here.
         settings: contact, stop and collision settings (:class:`ChronoSettings`).
 
     Raises:
         ModuleNotFoundError: without PyChrono (the message gives the conda command).
+        RuntimeError: from :meth:`step`, on soil, when the chassis reaches the soil.
     """
 
     def __init__(
@@ -99,7 +105,9 @@ class ChronoLanderSim(Landing):
     ) -> None:
         self.terrain = check_chrono_terrain(terrain)
         self.settings = settings if settings is not None else ChronoSettings()
-        self.params = chrono_params(params if params is not None else LanderParams(), self.settings)
+        self.params = chrono_params(
+            params if params is not None else LanderParams(), self.settings, self.terrain
+        )
         self.seed = int(seed)
         self.design = design
         self._init_absorber()
@@ -131,6 +139,7 @@ class ChronoLanderSim(Landing):
         self.model.system.Update()  # links cache lengths and speeds: the struts' strokes
         self._stroke, self._rate = self._read_strokes()
         self._contact_twist = self._read_contact_twist()
+        self._soil_touched = False
         self._work = np.zeros(len(CHRONO_LEDGER_TERMS))
         self._energy0 = self.mechanical_energy()
         self._start_history(body_lin_vel(self.model.chassis), self._cos_tilt())
@@ -160,6 +169,9 @@ class ChronoLanderSim(Landing):
         stroke, rate = self._stroke, self._rate
         force = self.absorber.update(stroke, rate)
         m.strut_forces.set_tick(force, stroke, rate)
+        if m.soil is not None:
+            m.soil.Synchronize(self.time)
+            m.soil.Advance(m.timestep)
         m.system.ForceUpdate()  # re-evaluate the struts at the step start (see the docstring)
         m.system.DoStepDynamics(m.timestep)
         self._stroke, self._rate = self._read_strokes()
@@ -172,9 +184,15 @@ class ChronoLanderSim(Landing):
         work[1] += half_dt * float(stops @ rate_sum)
         twist, self._contact_twist = self._contact_twist, self._read_contact_twist()
         touching = m.system.GetNumContacts() > 0
-        if touching:
+        if touching or m.soil is not None:
             twist += self._contact_twist
+        if touching:
             work[2] -= half_dt * self._contact_power(twist)
+        if m.soil is not None:
+            soil_power = self._soil_power(twist)
+            work[3] -= half_dt * soil_power
+            touching = self._soil_touched = self._soil_touched or soil_power != 0.0
+            self._check_chassis_above_soil()
         self._record(body_lin_vel(m.chassis), self._cos_tilt())
         if self._t_touchdown is None and touching:
             self._t_touchdown = self.time
@@ -198,6 +216,33 @@ class ChronoLanderSim(Landing):
                 total += float(force @ row[:3] + vec3(body.GetContactTorque()) @ row[3:])
         return total
 
+    def _soil_power(self, twist: np.ndarray) -> float:
+        """Power of the SCM soil's wrenches on the pads for the given twists (rows of the
+        contact bodies; the chassis, row 0, is not on the soil), held over the tick."""
+        soil = self.model.soil
+        total = 0.0
+        for body, row in zip(self.model.contact_bodies[1:], twist[1:], strict=True):
+            force, torque = soil.force_on(body)
+            total += float(force @ row[:3] + torque @ row[3:])
+        return total
+
+    def _check_chassis_above_soil(self) -> None:
+        """Raise when the chassis cylinder's lowest point reaches the soil surface (z = 0):
+        the chassis is not on the Chrono soil (see :mod:`.model`)."""
+        centre_local, radius, half = self.model.chassis_shape
+        chassis = self.model.chassis
+        w, x, y, z = body_rot(chassis).tolist()
+        rot_z = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+        centre_z = body_pos(chassis)[2] + float(rot_z @ centre_local)
+        axis_z = abs(float(rot_z @ self.model.chassis_axis))
+        lowest = centre_z - half * axis_z - radius * math.sqrt(max(0.0, 1.0 - axis_z * axis_z))
+        if lowest <= 0.0:
+            raise RuntimeError(
+                f"the chassis reached the soil (lowest point z={lowest:.3f} m at "
+                f"t={self.time:.3f} s): the Chrono lander has only its pads on SCM soil; "
+                "use the MuJoCo lander (LanderSim) for this landing"
+            )
+
     def _cos_tilt(self) -> float:
         """Cosine of the chassis axis' angle from the vertical (flat ground): the world z
         component of the axis, from the last row of the rotation matrix."""
@@ -212,6 +257,27 @@ class ChronoLanderSim(Landing):
     def _chassis_velocity(self) -> tuple[np.ndarray, np.ndarray]:
         chassis = self.model.chassis
         return body_lin_vel(chassis), body_ang_vel(chassis)
+
+    def render(self, width: int = 480, height: int = 360) -> np.ndarray:
+        """An offscreen picture of the lander now, (height, width, 3) uint8: the Chrono bodies'
+        poses drawn with the MuJoCo model of the same design (:mod:`..render`)."""
+        import mujoco
+
+        from chronogym.tasks.lander.render import LanderRenderer, pose_bodies
+
+        m = self.model
+        model = m.mujoco_model
+        cache = getattr(self, "_picture", None)
+        if cache is None or cache[0] is not model or cache[3].size != (width, height):
+            data = mujoco.MjData(model)
+            mujoco.mj_kinematics(model, data)  # world geoms, lights and cameras
+            ids = [model.body(name).id for name in BODY_NAMES]
+            cache = self._picture = (model, data, ids, LanderRenderer(model, width, height))
+        _, data, ids, renderer = cache
+        pos = np.array([body_pos(b) for b in m.bodies])
+        rot = np.array([quat_matrix(body_rot(b)) for b in m.bodies])
+        pose_bodies(model, data, ids, pos, rot)
+        return renderer.frame(data)
 
     def diverged(self, limit: float = 1e6) -> bool:
         """NaN/Inf or a huge value in a body state (``bodies_diverged``)."""
@@ -242,7 +308,7 @@ class ChronoLanderSim(Landing):
         elastic = float(np.sum(ab.elastic_energy))
         e_in = kin0 + pot0 - pot
         rest = e_in - kin - work["absorbers"] - work["joint_limits"]
-        residual = rest - work["contact"]
+        residual = rest - work["contact"] - work["soil"]
         e_init = self.params.e_init
         return {
             "E_init": e_init,
@@ -260,12 +326,23 @@ class ChronoLanderSim(Landing):
         }
 
     def metrics(self) -> dict[str, Any]:
-        """Touchdown metrics so far: those of ``LanderSim`` on rigid ground (``E_soil``
-        and ``max_sinkage`` are 0) with the Chrono energy ledger."""
+        """Touchdown metrics so far: those of ``LanderSim`` with the Chrono energy ledger.
+        ``E_soil`` is the soil's work on the pads, ``max_sinkage`` the depth of the deepest
+        soil node (both 0 on rigid ground)."""
         energy = self.energy_ledger()
         metrics = self._landing_metrics()
-        metrics.update(E_soil=0.0, max_sinkage=0.0, E_available=energy["E_in"], energy=energy)
+        metrics.update(
+            E_soil=energy["soil"],
+            max_sinkage=self.pad_sinkage(),
+            E_available=energy["E_in"],
+            energy=energy,
+        )
         return metrics
+
+    def pad_sinkage(self) -> float:
+        """Depth of the deepest soil node now [m] (0 on rigid ground): the deepest rut, as
+        ``LanderSim``'s ``max_sinkage`` (its soil grid's deepest plastic sinkage)."""
+        return 0.0 if self.model.soil is None else self.model.soil.deepest()
 
 
 def simulate_chrono_landing(

@@ -424,6 +424,16 @@ class LanderSim(Landing):
         q = self.data.qvel
         return q[0:3], q[3:6]
 
+    def render(self, width: int = 480, height: int = 360) -> np.ndarray:
+        """An offscreen picture of the lander now, (height, width, 3) uint8 (needs EGL or
+        OSMesa; :class:`~..render.LanderRenderer`)."""
+        from chronogym.tasks.lander.render import LanderRenderer
+
+        renderer = getattr(self, "_renderer", None)
+        if renderer is None or renderer.model is not self.model or renderer.size != (width, height):
+            renderer = self._renderer = LanderRenderer(self.model, width, height)
+        return renderer.frame(self.data)
+
     def diverged(self) -> bool:
         """MuJoCo flagged an unstable state, or NaN/Inf in the state (``mujoco_diverged``)."""
         return mujoco_diverged(self.data)

@@ -1,0 +1,268 @@
+"""chronogym's SCM (under MuJoCo bodies) against Chrono's ``SCMTerrain``, same presets.
+
+Both soils take one :class:`~chronogym.terrain.SoilParameters` (Chrono's own argument order),
+so differences come from the implementations and the multibody engines around them. Problems:
+
+* ``plate``: a square plate (side 0.21 m, 1 cm thick) settling on the soil under its weight;
+  static sinkage against Bekker's closed form ``z = (W / (A (Kc / b + Kphi)))^(1/n)``,
+  ``b = 2 A / perimeter`` (both engines estimate the patch width so). In both engines the
+  plate rides a vertical slide with the same over-damping (zeta 1.5 at the soil's stiffness
+  at the static sinkage, as ``tests/terrain/test_soil.py``): a free plate overshoots, and SCM
+  keeps the deepest sinkage as plastic (a free Chrono plate, 300 kg on "firm": 61 mm against
+  45 mm). The sinkage is the mean over the last ``--average-s`` seconds of ``--settle-s``.
+* ``lander``: the default design's landing on ``--lander-soil`` ("mars", the soil study's),
+  ``LanderSim`` on chronogym's SCM against ``ChronoLanderSim`` on Chrono's (pads on the soil,
+  0.125 ms both): ``a_max``, ``E_abs``, the soil's work and the deepest rut (the deepest
+  soil node at the end).
+* ``go1``: the Go1 standing at its home pose with zero action for ``--stand-s`` seconds on
+  each engine's soil (``terrain="soil"`` / ``terrain="scm"``): mean foot sinkage (foot sphere
+  bottom below z = 0) and base height.
+
+Prints a table, writes ``results/soil_cross_check.json``. Needs PyChrono with its vehicle
+module for the Chrono column.
+
+    python benchmarks/soil_cross_check.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from common import RESULTS, Column, header, settings, table, write_json
+
+OUT = RESULTS / "soil_cross_check.json"
+G = 9.81
+RES = 0.01
+HALF = 10.5 * RES  # plate half-width between grid nodes: 21 x 21 nodes under it
+THICK = 0.01
+PLATES = (("firm", 300.0), ("mars", 150.0), ("lete_sand", 1500.0))  # preset, kg
+FOOT_RADIUS = 0.02
+
+
+def bekker_sinkage(params: Any, weight: float, side: float = 2 * HALF) -> float:
+    """Closed-form static sinkage of a square plate: b = 2 A / perimeter = side / 2."""
+    area = side * side
+    return (weight / (area * (params.Kc / (side / 2) + params.Kphi))) ** (1 / params.n)
+
+
+def slide_damping(params: Any, mass: float) -> float:
+    """Damping of the plate's vertical slide [N s/m]: zeta 1.5 at the soil's stiffness at
+    the static sinkage (``n W / z``)."""
+    depth = bekker_sinkage(params, mass * G)
+    return 3.0 * math.sqrt(params.n * mass * G / depth * mass)
+
+
+def mujoco_plate(params: Any, mass: float, settle_s: float, average_s: float) -> float:
+    import mujoco
+
+    from chronogym.terrain import MujocoSoil
+
+    dt = 0.002
+    damping = slide_damping(params, mass)
+    xml = f"""<mujoco><option timestep="{dt}"/><worldbody>
+      <body name="plate" pos="0 0 {THICK + 1e-4}">
+        <joint name="z" type="slide" axis="0 0 1" damping="{damping}"/>
+        <geom type="box" size="{HALF} {HALF} {THICK}" mass="{mass}"/>
+      </body></worldbody></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    soil = MujocoSoil(model, data, params, bodies=["plate"], extent=(0.5, 0.4), resolution=RES)
+    steps, tail = round(settle_s / dt), round(average_s / dt)
+    heights = []
+    for i in range(steps):
+        soil.Advance(dt)
+        mujoco.mj_step(model, data)
+        if i >= steps - tail:
+            heights.append(float(data.xpos[model.body("plate").id, 2]))
+    return THICK - float(np.mean(heights))
+
+
+def chrono_plate(params: Any, mass: float, settle_s: float, average_s: float) -> tuple[float, int]:
+    """Static sinkage [m] and the number of grid nodes Chrono's ray casts hit under the plate."""
+    from chronogym.engines.chrono import body_pos, import_pychrono
+    from chronogym.engines.chrono_scm import ChronoSCM
+
+    chrono = import_pychrono()
+    dt = 0.0005
+    system = chrono.ChSystemSMC()
+    system.SetGravitationalAcceleration(chrono.ChVector3d(0, 0, -G))
+    system.SetCollisionSystemType(chrono.ChCollisionSystem.Type_BULLET)
+    material = chrono.ChContactMaterialSMC()
+    side = 2 * HALF
+    plate = chrono.ChBodyEasyBox(side, side, 2 * THICK, mass / (side * side * 2 * THICK), False)
+    plate.SetPos(chrono.ChVector3d(0, 0, THICK + 1e-4))
+    plate.AddCollisionShape(chrono.ChCollisionShapeBox(material, side, side, 2 * THICK))
+    plate.EnableCollision(True)
+    system.AddBody(plate)
+    ground = chrono.ChBody()
+    ground.SetFixed(True)
+    system.AddBody(ground)
+    slide = chrono.ChLinkLockPrismatic()  # along the frame's z
+    slide.Initialize(plate, ground, chrono.ChFramed(chrono.ChVector3d(0, 0, 0)))
+    damper = chrono.ChLinkTSDA()
+    damper.Initialize(plate, ground, False, chrono.ChVector3d(0, 0, 0), chrono.ChVector3d(0, 0, 1))
+    damper.SetSpringCoefficient(0.0)
+    damper.SetDampingCoefficient(slide_damping(params, mass))
+    system.AddLink(slide)
+    system.AddLink(damper)
+    soil = ChronoSCM(system, params, (0.5, 0.4), RES, [(plate, (0, 0, 0), (0.4, 0.4, 0.2))])
+    steps, tail = round(settle_s / dt), round(average_s / dt)
+    heights = []
+    for i in range(steps):
+        soil.Synchronize(system.GetChTime())
+        soil.Advance(dt)
+        system.DoStepDynamics(dt)
+        if i >= steps - tail:
+            heights.append(float(body_pos(plate)[2]))
+    return THICK - float(np.mean(heights)), int(soil.terrain.GetNumRayHits())
+
+
+def lander_landing(engine: str, preset: str) -> dict[str, float]:
+    """The default design's landing metrics on the preset's soil, in one engine."""
+    from chronogym.tasks.lander import Terrain, simulate_landing
+
+    terrain = Terrain(soil=preset)
+    if engine == "mujoco":
+        metrics = simulate_landing(terrain=terrain)
+    else:
+        from chronogym.tasks.lander.chrono.sim import simulate_chrono_landing
+
+        metrics = simulate_chrono_landing(terrain=terrain)
+    keys = ("a_max", "E_abs", "E_soil", "max_sinkage", "max_stroke", "J")
+    return {key: float(metrics[key]) for key in keys}
+
+
+def go1_standing(engine: str, preset: str, stand_s: float) -> dict[str, float]:
+    import gymnasium as gym
+
+    import chronogym  # noqa: F401  (registers the envs)
+
+    if engine == "mujoco":
+        env = gym.make("chronogym/Go1Velocity-v0", terrain="soil", soil=preset)
+    else:
+        env = gym.make("chronogym/ChronoGo1Velocity-v0", terrain="scm", soil=preset)
+    env.reset(seed=0, options={"command": (0.0, 0.0, 0.0)})
+    task = env.unwrapped.task
+    zero = np.zeros(12, dtype=np.float32)
+    fell = False
+    for _ in range(round(stand_s / task.control_dt)):
+        terminated = env.step(zero)[2]
+        fell = fell or terminated
+    feet_z = foot_heights(task, engine)
+    height = task._base_height()
+    env.close()
+    sinkage = float(np.mean(FOOT_RADIUS - feet_z))
+    return {"foot_sinkage": sinkage, "base_height": height, "fell": fell}
+
+
+def foot_heights(task: Any, engine: str) -> np.ndarray:
+    """Height of each foot sphere's centre [m]."""
+    if engine == "mujoco":
+        return task.data.geom_xpos[task._foot_geoms, 2].copy()
+    from chronogym.engines.chrono import body_pos, body_rot
+    from chronogym.tasks.quadruped.chrono_model import quat_to_matrix
+
+    return np.array(
+        [
+            (body_pos(calf) + quat_to_matrix(body_rot(calf)) @ offset)[2]
+            for calf, offset in zip(task.robot.calves, task._foot_offsets, strict=True)
+        ]
+    )
+
+
+def engine_rows(
+    problem: str, results: dict[str, dict[str, float]], quantities: tuple
+) -> list[dict[str, Any]]:
+    """Table rows of one problem: per (key, label, scale) the two engines' values."""
+    rows = []
+    for key, label, scale in quantities:
+        mj, ch = results["mujoco"][key], results["chrono"][key]
+        rows.append(
+            {
+                "problem": problem,
+                "quantity": label,
+                "closed_form": None,
+                "chronogym": scale * mj,
+                "chrono": scale * ch,
+                "difference": (mj - ch) / ch,
+                "chrono_nodes": None,
+                "closed_form_on_chrono_nodes": None,
+            }
+        )
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--settle-s", type=float, default=2.0)
+    parser.add_argument("--average-s", type=float, default=0.5)
+    parser.add_argument("--stand-s", type=float, default=2.0)
+    parser.add_argument("--go1-soil", default="firm")
+    parser.add_argument("--lander-soil", default="mars")
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args(argv)
+    if not 0 < args.average_s <= args.settle_s or not args.stand_s > 0:
+        parser.error("expected 0 < --average-s <= --settle-s and --stand-s > 0")
+    from chronogym.terrain import soil_preset
+
+    rows = []
+    for name, mass in PLATES:
+        params = soil_preset(name)
+        closed = bekker_sinkage(params, mass * G)
+        mj = mujoco_plate(params, mass, args.settle_s, args.average_s)
+        ch, hits = chrono_plate(params, mass, args.settle_s, args.average_s)
+        hit_side = math.sqrt(hits) * RES  # the square of nodes Chrono loads
+        rows.append(
+            {
+                "problem": f"plate {name} {mass:g} kg",
+                "quantity": "sinkage [mm]",
+                "closed_form": 1e3 * closed,
+                "chronogym": 1e3 * mj,
+                "chrono": 1e3 * ch,
+                "difference": (mj - ch) / ch,
+                "chrono_nodes": hits,
+                "plate_nodes": round(2 * HALF / RES) ** 2,
+                "closed_form_on_chrono_nodes": 1e3 * bekker_sinkage(params, mass * G, hit_side),
+            }
+        )
+    landing = {e: lander_landing(e, args.lander_soil) for e in ("mujoco", "chrono")}
+    rows += engine_rows(
+        f"lander default {args.lander_soil}",
+        landing,
+        (
+            ("a_max", "a_max [m/s^2]", 1.0),
+            ("E_abs", "E_abs [J]", 1.0),
+            ("E_soil", "soil's work [J]", 1.0),
+            ("max_sinkage", "deepest rut [mm]", 1e3),
+            ("max_stroke", "max stroke [mm]", 1e3),
+        ),
+    )
+    stand = {e: go1_standing(e, args.go1_soil, args.stand_s) for e in ("mujoco", "chrono")}
+    rows += engine_rows(
+        f"go1 standing {args.go1_soil}",
+        stand,
+        (("foot_sinkage", "foot sinkage [mm]", 1e3), ("base_height", "base height [mm]", 1e3)),
+    )
+    columns = [
+        Column("problem", 26, align="<", key="problem"),
+        Column("quantity", 18, align="<", key="quantity"),
+        Column("Bekker", 8, "{:.2f}", key="closed_form"),
+        Column("chronogym SCM", 13, "{:.2f}", key="chronogym"),
+        Column("Chrono SCM", 10, "{:.2f}", key="chrono"),
+        Column("diff", 7, "{:+.1%}", key="difference"),
+        Column("Chrono nodes", 12, "{}", key="chrono_nodes"),
+        Column("Bekker on them", 14, "{:.2f}", key="closed_form_on_chrono_nodes"),
+    ]
+    print(table(columns, rows, rule=True))
+    record = {**header("soil_cross_check", "mujoco"), "settings": settings(args)}
+    record["go1"] = stand
+    record["lander"] = landing
+    write_json(args.out, {**record, "rows": rows})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,327 @@
+"""Go1 velocity tracking in Project Chrono (``chronogym/ChronoGo1Velocity-v0``; needs ``pychrono``).
+
+The same task as :class:`~.task.Go1VelocityTask` (MuJoCo): the observation, action, reward
+terms, command sampling, pushes and termination are the same code (:mod:`.velocity`), and
+the robot is built from the same MJCF numbers (:mod:`.chrono_model`). So a policy trained
+in one engine runs unchanged in the other (sim-to-sim: ``chronogym play quadruped CKPT
+--engine chrono``, ``benchmarks/sim_to_sim.py``).
+
+Terrain: ``"rigid"``, a fixed box with its top at z = 0, or ``"scm"``: Chrono's own
+``SCMTerrain`` (``pychrono.vehicle``) with a chronogym soil preset (``soil``, default
+"firm": the same Bekker/Janosi numbers as the MuJoCo task's ``terrain="soil"``), flat at
+z = 0, active under each foot and around the trunk (hips and thighs included), so a fall
+onto the soil ends the episode as a fall onto the ground does. On SCM a foot is in contact
+when the soil pushes its calf up with more than 1 N.
+
+Pictures: Chrono's own visual systems need a display or a GPU, so ``render()`` draws the
+MuJoCo model of the same robot at the Chrono bodies' pose (base frame and joint angles).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from chronogym.engines.chrono import (
+    ChronoTask,
+    body_ang_vel,
+    body_lin_vel,
+    body_pos,
+    body_rot,
+    set_body_state,
+    vec3,
+)
+from chronogym.tasks.quadruped.chrono_model import (
+    ChronoGo1Model,
+    ChronoGo1Settings,
+    Go1Servos,
+    build_chrono_go1,
+    quat_from_matrix,
+    quat_to_matrix,
+)
+from chronogym.tasks.quadruped.config import CommandRanges, DomainRandomization, RewardWeights
+from chronogym.tasks.quadruped.model import (
+    CAMERA_NAME,
+    DEFAULT_JOINT_POS,
+    HOME_BASE_HEIGHT,
+    KP,
+    KV,
+)
+from chronogym.tasks.quadruped.velocity import Go1VelocityBase
+from chronogym.terrain.params import SoilParameters, soil_preset
+
+__all__ = ["CHRONO_PHYSICS_STEP", "CHRONO_TERRAINS", "ChronoGo1VelocityTask"]
+
+#: Ground under the Chrono Go1: a rigid box, or Chrono's SCMTerrain.
+CHRONO_TERRAINS: tuple[str, ...] = ("rigid", "scm")
+#: Default (dt, k) per contact method on rigid ground, 50 Hz policy.
+CHRONO_PHYSICS_STEP: dict[str, tuple[float, int]] = {"nsc": (0.002, 10), "smc": (0.0005, 40)}
+#: Default (dt, k) on SCM (its soil forces are explicit).
+CHRONO_SCM_STEP: tuple[float, int] = (0.001, 20)
+#: SCM active domains: (centre, full size) of a box around each foot (calf frame) and one
+#: around the trunk (trunk frame, hips and thighs inside) [m].
+FOOT_DOMAIN = (0.12, 0.12, 0.12)
+TRUNK_DOMAIN = ((0.0, 0.0, 0.0), (0.62, 0.40, 0.30))
+#: A foot is on the ground when the ground pushes its calf up with more than this [N].
+FOOT_CONTACT_FORCE = 1.0
+#: The trunk or a hip touches the ground when its contact force exceeds this [N].
+BASE_CONTACT_FORCE = 1.0
+
+
+class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
+    """Unitree Go1 tracking a velocity command, simulated by Project Chrono."""
+
+    render_modes = ("rgb_array",)
+    render_width: int = 480
+    render_height: int = 360
+    render_camera = CAMERA_NAME
+
+    def __init__(
+        self,
+        *,
+        dt: float | None = None,
+        k: int | None = None,
+        max_episode_steps: int | None = 1000,
+        commands: CommandRanges | None = None,
+        rewards: RewardWeights | None = None,
+        randomization: DomainRandomization | None = None,
+        action_scale: float = 0.25,
+        action_clip: float = 10.0,
+        max_tilt: float = 1.0,
+        base_height_target: float = HOME_BASE_HEIGHT,
+        air_time_threshold: float = 0.25,
+        reset_joint_noise: float = 0.1,
+        only_positive_rewards: bool = True,
+        kp: float | None = 35.0,
+        kd: float | None = 0.5,
+        terrain: str = "rigid",
+        soil: SoilParameters | str = "firm",
+        soil_resolution: float = 0.02,
+        soil_extent: float = 20.0,
+        settings: ChronoGo1Settings | None = None,
+    ) -> None:
+        self._init_tracking(
+            max_episode_steps=max_episode_steps,
+            commands=commands,
+            rewards=rewards,
+            randomization=randomization,
+            action_scale=action_scale,
+            action_clip=action_clip,
+            max_tilt=max_tilt,
+            base_height_target=base_height_target,
+            air_time_threshold=air_time_threshold,
+            reset_joint_noise=reset_joint_noise,
+            only_positive_rewards=only_positive_rewards,
+            kp=kp,
+            kd=kd,
+        )
+        if terrain not in CHRONO_TERRAINS:
+            raise ValueError(
+                f"terrain={terrain!r}: expected one of {', '.join(CHRONO_TERRAINS)} for the "
+                "Chrono Go1"
+                + (
+                    " ('soil' is chronogym's SCM for MuJoCo: chronogym/Go1Velocity-v0)"
+                    if terrain == "soil"
+                    else ""
+                )
+            )
+        self.settings = settings if settings is not None else ChronoGo1Settings()
+        if not isinstance(self.settings, ChronoGo1Settings):
+            raise ValueError(f"settings={settings!r}: expected a ChronoGo1Settings or None")
+        if not (isinstance(soil_resolution, (int, float)) and 0.005 <= soil_resolution <= 0.1):
+            raise ValueError(
+                f"soil_resolution={soil_resolution!r}: expected a node spacing in [0.005, 0.1] m"
+            )
+        if not (isinstance(soil_extent, (int, float)) and 1.0 <= soil_extent <= 1000.0):
+            raise ValueError(f"soil_extent={soil_extent!r}: expected a side in [1, 1000] m")
+        self.soil_params = soil_preset(soil) if isinstance(soil, str) else soil
+        if not isinstance(self.soil_params, SoilParameters):
+            raise ValueError(f"soil={soil!r}: expected a SoilParameters or a preset name")
+        self.soil_resolution = float(soil_resolution)
+        self.soil_extent = float(soil_extent)
+        default_dt, default_k = (
+            CHRONO_SCM_STEP if terrain == "scm" else CHRONO_PHYSICS_STEP[self.settings.contact]
+        )
+        self.dt = default_dt if dt is None else dt
+        self.k = default_k if k is None else k
+        self.terrain = terrain
+        self.scm: Any = None
+
+    # --- init ------------------------------------------------------------------------------
+
+    def build_system(self) -> Any:
+        if self.terrain == "scm":
+            from chronogym.engines.chrono_scm import import_chrono_vehicle
+
+            import_chrono_vehicle()  # the clear error before anything is built
+        self.robot: ChronoGo1Model = build_chrono_go1(
+            self.settings, rigid_ground=self.terrain == "rigid"
+        )
+        return self.robot.system
+
+    def setup(self) -> None:
+        import mujoco
+
+        robot = self.robot
+        self.servos = Go1Servos(
+            robot.motors,
+            robot.torque_functions,
+            kp=KP if self.kp is None else self.kp,
+            kd=KV if self.kd is None else self.kd,
+            ranges=robot.layout.joint_ranges,
+            joint_inertia=robot.layout.joint_inertia,
+            limit_time_constant=self.settings.limit_time_constant,
+        )
+        self.advanceables = [self.servos, self.system]
+        if self.terrain == "scm":
+            self.scm = self._add_scm()
+            self.advanceables = [self.servos, self.scm, self.system]
+        # a MuJoCo copy of the robot: the reset pose's kinematics, and the pictures
+        from chronogym.tasks.quadruped.model import go1_xml_path
+
+        self._mj_model = mujoco.MjModel.from_xml_path(str(go1_xml_path()))
+        self._mj_data = mujoco.MjData(self._mj_model)
+        self._renderer: Any = None
+        self._nominal_trunk_mass = float(robot.trunk.GetMass())
+        self._trunk_ipos = robot.layout.trunk_ipos
+        self._trunk_irot = robot.layout.trunk_irot
+        self._body_ids = [body.mujoco_id for body in robot.layout.bodies]
+        self._foot_offsets = robot.layout.foot_offsets
+        self._calf_contact = [calf.GetContactForce for calf in robot.calves]
+        self._fatal_contact = [body.GetContactForce for body in robot.fatal]
+        self._torques = np.zeros(12)
+        self._setup_tracking()
+
+    def _add_scm(self) -> Any:
+        from chronogym.engines.chrono_scm import ChronoSCM
+
+        robot = self.robot
+        domains = [(robot.trunk, *TRUNK_DOMAIN)]
+        domains += [
+            (calf, offset, FOOT_DOMAIN)
+            for calf, offset in zip(robot.calves, robot.layout.foot_offsets, strict=True)
+        ]
+        side = self.soil_extent
+        return ChronoSCM(self.system, self.soil_params, (side, side), self.soil_resolution, domains)
+
+    # --- engine hooks ----------------------------------------------------------------------
+
+    def _reset_pose(self, yaw: float, joints: np.ndarray | None) -> None:
+        import mujoco
+
+        m, d = self._mj_model, self._mj_data
+        mujoco.mj_resetDataKeyframe(m, d, m.key("home").id)
+        d.qpos[3:7] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        if joints is not None:
+            d.qpos[7:] = joints
+        mujoco.mj_kinematics(m, d)
+        zero = (0.0, 0.0, 0.0)
+        for body, b in zip(self.robot.bodies, self._body_ids, strict=True):
+            rot = quat_from_matrix(d.ximat[b].reshape(3, 3))
+            set_body_state(body, pos=d.xipos[b], rot=rot, lin_vel=zero, ang_vel=zero)
+        self.system.SetChTime(0.0)
+        self.system.Update()
+        if self.scm is not None:
+            self.scm.reset()
+        self.servos.set_targets(DEFAULT_JOINT_POS)
+        self.servos.zero()
+        self._torques[:] = 0.0
+
+    def _set_friction(self, mu: float) -> None:
+        for material in self.robot.materials:
+            material.SetFriction(float(mu))
+
+    def _set_added_base_mass(self, dm: float) -> None:
+        self.robot.trunk.SetMass(self._nominal_trunk_mass + float(dm))
+
+    def _set_joint_targets(self, targets: np.ndarray) -> None:
+        self.servos.set_targets(targets)
+
+    def _kick_base(self, dv: np.ndarray) -> None:
+        kick = np.array([dv[0], dv[1], 0.0])
+        for body in self.robot.bodies:  # every body, as MuJoCo's free-joint velocity does
+            set_body_state(body, lin_vel=body_lin_vel(body) + kick)
+
+    def base_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """Position and 3x3 orientation of the MuJoCo trunk frame (the base), in the world."""
+        trunk = self.robot.trunk
+        rot = quat_to_matrix(body_rot(trunk)) @ self._trunk_irot.T
+        return body_pos(trunk) - rot @ self._trunk_ipos, rot
+
+    def _read_state(self, raw: np.ndarray) -> None:
+        trunk = self.robot.trunk
+        pos, rot = self.base_frame()
+        omega = body_ang_vel(trunk)  # world frame
+        v_origin = body_lin_vel(trunk) + np.cross(omega, pos - body_pos(trunk))
+        raw[0:3] = rot.T @ omega
+        raw[3:6] = -rot[2]
+        raw[9:21] = self.servos.angles() - DEFAULT_JOINT_POS
+        raw[21:33] = self.servos.rates()
+        self.base_lin_vel = rot.T @ v_origin
+        self._base_z = float(pos[2])
+
+    def _update_contacts(self) -> None:
+        if self.scm is not None:
+            force_on = self.scm.force_on
+            self.feet_contact_now = np.array(
+                [force_on(calf)[0][2] > FOOT_CONTACT_FORCE for calf in self.robot.calves]
+            )
+            self._base_contact = any(
+                float(np.linalg.norm(force_on(body)[0])) > BASE_CONTACT_FORCE
+                for body in self.robot.fatal
+            )
+            return
+        self.feet_contact_now = np.array(
+            [vec3(force())[2] > FOOT_CONTACT_FORCE for force in self._calf_contact]
+        )
+        self._base_contact = any(
+            float(np.linalg.norm(vec3(force()))) > BASE_CONTACT_FORCE
+            for force in self._fatal_contact
+        )
+
+    def _joint_torques(self) -> np.ndarray:
+        return self.servos.torque
+
+    def _base_height(self) -> float:
+        return self._base_z
+
+    def _feet_xy(self) -> np.ndarray:
+        feet = np.empty((4, 2))
+        for i, (calf, offset) in enumerate(zip(self.robot.calves, self._foot_offsets, strict=True)):
+            feet[i] = (body_pos(calf) + quat_to_matrix(body_rot(calf)) @ offset)[:2]
+        return feet
+
+    # --- pictures --------------------------------------------------------------------------
+
+    def mujoco_qpos(self) -> np.ndarray:
+        """The MuJoCo ``qpos`` of the Chrono robot's pose: base frame and joint angles."""
+        pos, rot = self.base_frame()
+        return np.concatenate([pos, quat_from_matrix(rot), self.servos.angles()])
+
+    def render_unavailable(self) -> str | None:
+        from chronogym.engines.mujoco import gl_unavailable
+
+        return gl_unavailable()
+
+    def render(self) -> np.ndarray:
+        import mujoco
+
+        from chronogym.engines.mujoco import check_headless_gl
+
+        m, d = self._mj_model, self._mj_data
+        if self._renderer is None:
+            check_headless_gl()
+            self._renderer = mujoco.Renderer(m, self.render_height, self.render_width)
+        d.qpos[:] = self.mujoco_qpos()
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(m, d)
+        self._renderer.update_scene(d, camera=self.render_camera)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        renderer = getattr(self, "_renderer", None)
+        if renderer is not None:
+            renderer.close()
+            self._renderer = None
