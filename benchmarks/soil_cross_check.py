@@ -152,26 +152,11 @@ def go1_standing(engine: str, preset: str, stand_s: float) -> dict[str, float]:
     for _ in range(round(stand_s / task.control_dt)):
         terminated = env.step(zero)[2]
         fell = fell or terminated
-    feet_z = foot_heights(task, engine)
+    feet_z = task.feet_positions()[:, 2]
     height = task._base_height()
     env.close()
     sinkage = float(np.mean(FOOT_RADIUS - feet_z))
     return {"foot_sinkage": sinkage, "base_height": height, "fell": fell}
-
-
-def foot_heights(task: Any, engine: str) -> np.ndarray:
-    """Height of each foot sphere's centre [m]."""
-    if engine == "mujoco":
-        return task.data.geom_xpos[task._foot_geoms, 2].copy()
-    from chronogym.engines.chrono import body_pos, body_rot
-    from chronogym.tasks.quadruped.chrono_model import quat_to_matrix
-
-    return np.array(
-        [
-            (body_pos(calf) + quat_to_matrix(body_rot(calf)) @ offset)[2]
-            for calf, offset in zip(task.robot.calves, task._foot_offsets, strict=True)
-        ]
-    )
 
 
 def engine_rows(

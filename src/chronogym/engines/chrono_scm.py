@@ -80,6 +80,7 @@ class ChronoSCM:
         if not isinstance(params, SoilParameters):
             raise ValueError(f"params={params!r}: expected a chronogym SoilParameters")
         self.params = params
+        self.chrono = chrono
         self.vehicle = vehicle
         self.terrain = vehicle.SCMTerrain(system, False)  # no visualization mesh
         self.terrain.SetReferenceFrame(chrono.ChCoordsysd(chrono.ChVector3d(0.0, 0.0, 0.0)))
@@ -120,6 +121,5 @@ class ChronoSCM:
 
     def height(self, x: float, y: float) -> float:
         """The soil surface's height at (x, y) [m] (0 where untouched)."""
-        import pychrono as chrono
-
-        return float(self.terrain.GetHeight(chrono.ChVector3d(float(x), float(y), 0.0)))
+        point = self.chrono.ChVector3d(float(x), float(y), 0.0)
+        return float(self.terrain.GetHeight(point))

@@ -23,11 +23,15 @@ def pose_bodies(
     data: mujoco.MjData,
     body_ids: Sequence[int],
     com_pos: np.ndarray,
-    com_rot: np.ndarray,
+    com_quat: np.ndarray,
 ) -> None:
     """Write body and geom poses into ``data`` from each body's centre of mass ``com_pos``
-    (n, 3) and principal axes ``com_rot`` (n, 3, 3), world frame (Chrono's body frames)."""
-    for b, pos, rot in zip(body_ids, com_pos, com_rot, strict=True):
+    (n, 3) and principal axes ``com_quat`` (n, 4: w, x, y, z), world frame (Chrono's body
+    frames)."""
+    for b, pos, quat in zip(body_ids, com_pos, com_quat, strict=True):
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, quat)
+        rot = rot.reshape(3, 3)
         inertial = np.zeros(9)
         mujoco.mju_quat2Mat(inertial, model.body_iquat[b])
         frame = rot @ inertial.reshape(3, 3).T

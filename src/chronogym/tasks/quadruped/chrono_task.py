@@ -48,6 +48,7 @@ from chronogym.tasks.quadruped.model import (
     HOME_BASE_HEIGHT,
     KP,
     KV,
+    go1_xml_path,
 )
 from chronogym.tasks.quadruped.velocity import Go1VelocityBase
 from chronogym.terrain.params import SoilParameters, soil_preset
@@ -180,8 +181,6 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
             self.scm = self._add_scm()
             self.advanceables = [self.servos, self.scm, self.system]
         # a MuJoCo copy of the robot: the reset pose's kinematics, and the pictures
-        from chronogym.tasks.quadruped.model import go1_xml_path
-
         self._mj_model = mujoco.MjModel.from_xml_path(str(go1_xml_path()))
         self._mj_data = mujoco.MjData(self._mj_model)
         self._renderer: Any = None
@@ -288,11 +287,13 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
     def _base_height(self) -> float:
         return self._base_z
 
-    def _feet_xy(self) -> np.ndarray:
-        feet = np.empty((4, 2))
-        for i, (calf, offset) in enumerate(zip(self.robot.calves, self._foot_offsets, strict=True)):
-            feet[i] = (body_pos(calf) + quat_to_matrix(body_rot(calf)) @ offset)[:2]
-        return feet
+    def feet_positions(self) -> np.ndarray:
+        return np.array(
+            [
+                body_pos(calf) + quat_to_matrix(body_rot(calf)) @ offset
+                for calf, offset in zip(self.robot.calves, self._foot_offsets, strict=True)
+            ]
+        )
 
     # --- pictures --------------------------------------------------------------------------
 

@@ -269,5 +269,5 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
     def _base_height(self) -> float:
         return float(self.data.qpos[2])
 
-    def _feet_xy(self) -> np.ndarray:
-        return self.data.geom_xpos[self._foot_geoms, :2]
+    def feet_positions(self) -> np.ndarray:
+        return self.data.geom_xpos[self._foot_geoms]

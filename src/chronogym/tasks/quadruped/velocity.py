@@ -17,7 +17,7 @@ subclass reads and writes its simulation through a few hooks:
 ``_update_contacts()``        set ``self.feet_contact_now`` (4 bools) and ``self._base_contact``
 ``_joint_torques()``          the 12 servo torques of the last tick (N m)
 ``_base_height()``            the height of the base frame's origin (m)
-``_feet_xy()``                the feet's (4, 2) horizontal positions (m)
+``feet_positions()``          the foot centres, (4, 3) world positions (m)
 ``_set_friction(mu)``         foot-ground friction coefficient (domain randomization)
 ``_set_added_base_mass(dm)``  trunk mass = nominal + ``dm`` (domain randomization)
 ===========================  =================================================================
@@ -173,8 +173,12 @@ class Go1VelocityBase(Task):
     def _base_height(self) -> float:
         raise NotImplementedError
 
-    def _feet_xy(self) -> np.ndarray:
+    def feet_positions(self) -> np.ndarray:
+        """World positions of the four foot centres, (4, 3) [m], leg order FR, FL, RR, RL."""
         raise NotImplementedError
+
+    def _feet_xy(self) -> np.ndarray:
+        return self.feet_positions()[:, :2]
 
     def _set_friction(self, mu: float) -> None:
         raise NotImplementedError

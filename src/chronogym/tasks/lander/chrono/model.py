@@ -46,6 +46,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from chronogym.engines.chrono import chrono_frame, chrono_quaternion, chrono_vector
 from chronogym.tasks.lander.chrono.struts import StrutForces, stop_coefficients
 from chronogym.tasks.lander.design import LanderDesign, LanderParams
 from chronogym.tasks.lander.geometry import N_LEGS, leg_geometry, quat_from_axes
@@ -198,18 +199,6 @@ class ChronoLanderModel:
         return [self.bodies[0], *self.bodies[3::4]]
 
 
-def _vec(chrono: Any, v: np.ndarray) -> Any:
-    return chrono.ChVector3d(float(v[0]), float(v[1]), float(v[2]))
-
-
-def _quat(chrono: Any, q: np.ndarray) -> Any:
-    return chrono.ChQuaterniond(float(q[0]), float(q[1]), float(q[2]), float(q[3]))
-
-
-def _frame(chrono: Any, pos: np.ndarray, quat: np.ndarray) -> Any:
-    return chrono.ChFramed(_vec(chrono, pos), _quat(chrono, quat))
-
-
 def _material(chrono: Any, friction: float, settings: ChronoSettings) -> Any:
     """The one SMC material of every shape: a pad's ``pad_points`` contact points together
     have the settings' stiffness and damping (Chrono averages the coefficients of the two
@@ -266,9 +255,9 @@ def build_chrono_lander(
         body = chrono.ChBody()  # at the centre of mass, along the principal axes
         body.SetName(name)
         body.SetMass(float(masses[j]))
-        body.SetInertiaXX(_vec(chrono, inertias[j]))
-        body.SetPos(_vec(chrono, d.xipos[b]))
-        body.SetRot(_quat(chrono, quat_from_axes(*d.ximat[b].reshape(3, 3).T)))
+        body.SetInertiaXX(chrono_vector(inertias[j]))
+        body.SetPos(chrono_vector(d.xipos[b]))
+        body.SetRot(chrono_quaternion(quat_from_axes(*d.ximat[b].reshape(3, 3).T)))
         system.AddBody(body)
         bodies.append(body)
     pad_boxes = _add_contact_shapes(chrono, bodies, info, d, material, settings, on_soil)
@@ -367,7 +356,7 @@ def _add_contact_shapes(
         radius, half = (float(x) for x in m.geom_size[g][:2])
         if name == "chassis" or on_soil:
             shape = chrono.ChCollisionShapeCylinder(material, radius, 2.0 * half)
-            body.AddCollisionShape(shape, _frame(chrono, pos, quat_from_axes(*rot.T)))
+            body.AddCollisionShape(shape, chrono_frame(pos, quat_from_axes(*rot.T)))
             if name != "chassis":
                 extent = np.array([radius + 0.03, radius + 0.03, half + 0.15])  # cylinder frame
                 pad_boxes.append((body, pos, 2.0 * np.abs(rot) @ extent))
@@ -377,7 +366,7 @@ def _add_contact_shapes(
                 rim = settings.pad_ring * radius
                 local = np.array([rim * math.cos(phi), rim * math.sin(phi), r - half])
                 point = chrono.ChCollisionShapeSphere(material, r)
-                body.AddCollisionShape(point, _frame(chrono, pos + rot @ local, identity))
+                body.AddCollisionShape(point, chrono_frame(pos + rot @ local, identity))
         body.EnableCollision(True)
         model = body.GetCollisionModel()
         model.SetFamily(1)
@@ -410,15 +399,15 @@ def _leg_links(
     a, b, k, p = (origin + leg[key] for key in ("A", "B", "K", "P"))
     x_l, y_l, z_l = leg["strut_rot"].T
     hinge = chrono.ChLinkLockRevolute()  # about the frame's z: the tangential axis
-    hinge.Initialize(upper, chassis, _frame(chrono, a, quat_from_axes(y_l, z_l, x_l)))
+    hinge.Initialize(upper, chassis, chrono_frame(a, quat_from_axes(y_l, z_l, x_l)))
     slide = chrono.ChLinkLockPrismatic()  # along the frame's z: the strut axis
-    slide.Initialize(lower, upper, _frame(chrono, p, leg["strut_quat"]))
+    slide.Initialize(lower, upper, chrono_frame(p, leg["strut_quat"]))
     links = [hinge, slide]
     identity = np.array([1.0, 0.0, 0.0, 0.0])
     for body_1, body_2, point in ((pad, lower, p), (secondary, chassis, b), (secondary, upper, k)):
         ball = chrono.ChLinkLockSpherical()
-        ball.Initialize(body_1, body_2, _frame(chrono, point, identity))
+        ball.Initialize(body_1, body_2, chrono_frame(point, identity))
         links.append(ball)
     strut = chrono.ChLinkTSDA()  # force: struts.StrutForces
-    strut.Initialize(upper, lower, False, _vec(chrono, a), _vec(chrono, p))
+    strut.Initialize(upper, lower, False, chrono_vector(a), chrono_vector(p))
     return [*links, strut]

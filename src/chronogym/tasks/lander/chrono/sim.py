@@ -54,7 +54,6 @@ from chronogym.engines.chrono import (
     body_pos,
     body_rot,
     probe,
-    quat_matrix,
     set_body_state,
     vec3,
 )
@@ -275,8 +274,8 @@ class ChronoLanderSim(Landing):
             cache = self._picture = (model, data, ids, LanderRenderer(model, width, height))
         _, data, ids, renderer = cache
         pos = np.array([body_pos(b) for b in m.bodies])
-        rot = np.array([quat_matrix(body_rot(b)) for b in m.bodies])
-        pose_bodies(model, data, ids, pos, rot)
+        quat = np.array([body_rot(b) for b in m.bodies])
+        pose_bodies(model, data, ids, pos, quat)
         return renderer.frame(data)
 
     def diverged(self, limit: float = 1e6) -> bool:
