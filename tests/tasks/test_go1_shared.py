@@ -186,3 +186,16 @@ def test_one_soil_preset_gives_chronos_scm_arguments_in_order():
         2e8,
         3e4,
     )
+
+
+def test_chrono_scm_rejects_bad_geometry_before_importing_pychrono():
+    from chronogym.engines.chrono_scm import ChronoSCM
+    from chronogym.terrain import soil_preset
+
+    firm = soil_preset("firm")
+    with pytest.raises(ValueError, match=r"params='firm': expected a chronogym SoilParameters"):
+        ChronoSCM(None, "firm", (1.0, 1.0), 0.01, [])
+    with pytest.raises(ValueError, match=r"size=\(1.0, -1.0\): expected \(x, y\) extents > 0"):
+        ChronoSCM(None, firm, (1.0, -1.0), 0.01, [])
+    with pytest.raises(ValueError, match=r"resolution=0.8: expected a grid spacing > 0 and at"):
+        ChronoSCM(None, firm, (1.0, 1.0), 0.8, [])

@@ -13,6 +13,7 @@ module import.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -54,6 +55,15 @@ def import_chrono_vehicle() -> Any:
     return vehicle
 
 
+def _positive(value: Any) -> bool:
+    return (
+        isinstance(value, (int, float))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and value > 0
+    )
+
+
 class ChronoSCM:
     """A flat patch of Chrono SCM soil at z = 0 under some bodies of a Chrono system.
 
@@ -75,10 +85,17 @@ class ChronoSCM:
         resolution: float,
         domains: Sequence[tuple[Any, Sequence[float], Sequence[float]]],
     ) -> None:
-        chrono = import_pychrono()
-        vehicle = import_chrono_vehicle()
         if not isinstance(params, SoilParameters):
             raise ValueError(f"params={params!r}: expected a chronogym SoilParameters")
+        if len(size) != 2 or not all(_positive(s) for s in size):
+            raise ValueError(f"size={size!r}: expected (x, y) extents > 0 in m")
+        if not _positive(resolution) or resolution > min(size) / 2:
+            raise ValueError(
+                f"resolution={resolution!r}: expected a grid spacing > 0 and at most half the "
+                f"patch's smaller side ({min(size) / 2:g} m)"
+            )
+        chrono = import_pychrono()
+        vehicle = import_chrono_vehicle()
         self.params = params
         self.chrono = chrono
         self.vehicle = vehicle
