@@ -110,6 +110,11 @@ def test_chrono_task_rejects_bad_input_before_building():
         ChronoGo1Settings(contact="penalty")
     with pytest.raises(ValueError, match=r"friction=-1: expected None or a float > 0"):
         ChronoGo1Settings(friction=-1)
+    with pytest.raises(ValueError, match=r"collision='gpu': expected one of bullet, multicore"):
+        ChronoGo1Settings(collision="gpu")
+    multicore = ChronoGo1Settings(collision="multicore")
+    with pytest.raises(ValueError, match=r"collision='multicore' on terrain='rigid'.*'scm'"):
+        ChronoGo1VelocityTask(terrain="rigid", settings=multicore)
     with pytest.raises(ValueError, match=r"action_scale=0: expected a finite float > 0"):
         ChronoGo1VelocityTask(action_scale=0)
     with pytest.raises(ValueError, match=r"terrain='scm'.*ChronoGo1Velocity-v0"):

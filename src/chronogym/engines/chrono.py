@@ -46,6 +46,12 @@ MOTOR_FUNCTION_SETTERS = (
     "SetAngleFunction",
     "SetMotionFunction",
 )
+#: Chrono's collision systems by chronogym name: ``bullet`` (Chrono's default) and
+#: ``multicore`` (Chrono's own, needs Chrono built with Thrust). On SCM soil they differ in
+#: the ray casts that find the bodies: single-precision Bullet reports hits up to ~1 cm
+#: outside a moving shape, multicore's are exact for spheres and boxes (but its cylinder
+#: and capsule ray tests use the wrong axis in Chrono 10). See ``benchmarks/soil_cross_check.py``.
+COLLISION_SYSTEMS: dict[str, str] = {"bullet": "Type_BULLET", "multicore": "Type_MULTICORE"}
 VECTOR_TYPES = ("ChVector3d", "ChVectorD")
 QUATERNION_TYPES = ("ChQuaterniond", "ChQuaternionD")
 
@@ -142,6 +148,28 @@ def system_bodies(system: Any) -> list[Any]:
 
 
 # --- writing state ---------------------------------------------------------------------------
+
+
+def check_collision_system(name: str) -> str:
+    """``name`` if it is one of :data:`COLLISION_SYSTEMS`, else ValueError."""
+    if name not in COLLISION_SYSTEMS:
+        raise ValueError(f"collision={name!r}: expected one of {', '.join(COLLISION_SYSTEMS)}")
+    return name
+
+
+def set_collision_system(chrono: ModuleType, system: Any, name: str) -> None:
+    """Give ``system`` the named collision system (before any body is added).
+
+    Chrono built without Thrust quietly falls back to Bullet when asked for multicore; this
+    raises instead, so that a setting never silently means something else.
+    """
+    kind = getattr(chrono.ChCollisionSystem, COLLISION_SYSTEMS[check_collision_system(name)])
+    system.SetCollisionSystemType(kind)
+    if int(system.GetCollisionSystem().GetType()) != int(kind):
+        raise RuntimeError(
+            f"collision={name!r}: this PyChrono has no {name} collision system (Chrono "
+            "builds it only with Thrust); use collision='bullet'"
+        )
 
 
 def chrono_vector(values: Iterable[float]) -> Any:

@@ -67,6 +67,13 @@ def _positive(value: Any) -> bool:
 class ChronoSCM:
     """A flat patch of Chrono SCM soil at z = 0 under some bodies of a Chrono system.
 
+    The soil finds the bodies by casting a ray from each grid node into the system's collision
+    system, so that system shapes the footprint: Chrono's default single-precision Bullet
+    returns hits up to ~1 cm off a moving shape, and its collision envelope widens footprints
+    (``RayHit`` corrects only the depth). For small shapes use a small envelope, and Chrono's
+    multicore collision system (spheres, boxes) or Bullet built with
+    ``CH_USE_BULLET_DOUBLE=ON`` (``benchmarks/soil_cross_check.py``).
+
     Args:
         system: the ``ChSystem`` (with a collision system already set).
         params: the soil (a chronogym preset or ``SoilParameters``).

@@ -35,6 +35,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from chronogym.engines.chrono import check_collision_system, set_collision_system
 from chronogym.tasks.quadruped.model import (
     BASE_BODY_NAME,
     FOOT_GEOM_NAMES,
@@ -82,6 +83,11 @@ class ChronoGo1Settings:
             the reduced mass of the pair).
         friction_damping: SMC tangential damping ``g_t`` [1/s]: Coulomb's limit is reached
             above ``mu F_n / (g_t m)`` of slip.
+        collision: Chrono's collision system, ``"bullet"`` (Chrono's default) or
+            ``"multicore"`` (needs Chrono built with Thrust). It matters on SCM soil, whose
+            ray casts find the feet: Bullet's (single precision) hit up to ~1 cm outside a
+            moving foot sphere, so its soil carries a wider footprint and the feet sink
+            less; multicore's are exact (``benchmarks/soil_cross_check.py``).
         envelope: Bullet's collision envelope [m]; margin: its collision margin [m].
         limit_time_constant: time constant of the joint limits [s] (MuJoCo's default
             ``solref``).
@@ -93,6 +99,7 @@ class ChronoGo1Settings:
     contact_stiffness: float = 2.0e5
     contact_damping: float = 4.0e3
     friction_damping: float = 2.0e3
+    collision: str = "bullet"
     envelope: float = 0.005
     margin: float = 0.002
     limit_time_constant: float = 0.02
@@ -102,6 +109,7 @@ class ChronoGo1Settings:
             raise ValueError(
                 f"contact={self.contact!r}: expected one of {', '.join(CONTACT_METHODS)}"
             )
+        check_collision_system(self.collision)
         for name in (
             "contact_stiffness",
             "contact_damping",
@@ -424,7 +432,7 @@ def _new_system(chrono: Any, settings: ChronoGo1Settings) -> Any:
         system.SetContactForceModel(chrono.ChSystemSMC.Hooke)
         system.SetTangentialDisplacementModel(chrono.ChSystemSMC.OneStep)
     system.SetGravitationalAcceleration(chrono.ChVector3d(0.0, 0.0, -9.81))
-    system.SetCollisionSystemType(chrono.ChCollisionSystem.Type_BULLET)
+    set_collision_system(chrono, system, settings.collision)
     if settings.contact == "nsc":
         system.SetSolverType(chrono.ChSolver.Type_BARZILAIBORWEIN)
         system.GetSolver().AsIterative().SetMaxIterations(settings.solver_iterations)

@@ -132,6 +132,12 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         self.settings = settings if settings is not None else ChronoGo1Settings()
         if not isinstance(self.settings, ChronoGo1Settings):
             raise ValueError(f"settings={settings!r}: expected a ChronoGo1Settings or None")
+        if self.settings.collision != "bullet" and terrain != "scm":
+            raise ValueError(
+                f"settings.collision={self.settings.collision!r} on terrain={terrain!r}: "
+                "expected 'bullet' on rigid ground (on Chrono's multicore collision system a "
+                "foot went through the ground box); multicore is for terrain='scm'"
+            )
         if not (isinstance(soil_resolution, (int, float)) and 0.005 <= soil_resolution <= 0.1):
             raise ValueError(
                 f"soil_resolution={soil_resolution!r}: expected a node spacing in [0.005, 0.1] m"
