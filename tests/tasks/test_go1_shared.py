@@ -101,6 +101,18 @@ def test_joint_limit_only_pushes_back_into_the_range():
     np.testing.assert_array_equal(torque, [0.0, 0.0, 0.0])
 
 
+def test_chrono_go1_envelope_depends_on_the_ground_unless_set():
+    """Bullet's envelope finds rigid contacts early but widens what SCM's ray casts see, so the
+    default is 5 mm on rigid ground and 0.1 mm on soil; a value set by hand is kept."""
+    default = ChronoGo1Settings()
+    assert default.collision_margins(rigid_ground=True) == (0.005, 0.002)
+    assert default.collision_margins(rigid_ground=False) == (1e-4, 1e-4)
+    chosen = ChronoGo1Settings(envelope=0.003, margin=0.001)
+    assert chosen.collision_margins(rigid_ground=False) == (0.003, 0.001)
+    with pytest.raises(ValueError, match=r"envelope=0: expected None or a finite float > 0"):
+        ChronoGo1Settings(envelope=0)
+
+
 def test_chrono_task_rejects_bad_input_before_building():
     with pytest.raises(ValueError, match=r"terrain='soil'.*chronogym/Go1Velocity-v0"):
         ChronoGo1VelocityTask(terrain="soil")
