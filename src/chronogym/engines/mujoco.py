@@ -89,6 +89,33 @@ def mujoco_diverged(data: Any) -> bool:
     return not (np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all())
 
 
+class SceneRenderer:
+    """Offscreen frames of a MuJoCo model from one camera; the GL context is made (and
+    checked) on the first frame, so a task that never renders never needs one."""
+
+    def __init__(self, model: Any, width: int, height: int, camera: str | int = -1) -> None:
+        self.model = model
+        self.size = (width, height)
+        self.camera = camera
+        self._renderer: Any = None
+
+    def frame(self, data: Any) -> np.ndarray:
+        """(height, width, 3) uint8 image of ``data``'s current scene."""
+        if self._renderer is None:
+            import mujoco
+
+            check_headless_gl()
+            width, height = self.size
+            self._renderer = mujoco.Renderer(self.model, height, width)
+        self._renderer.update_scene(data, camera=self.camera)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
 class MujocoTask(Task):
     """A Task over one MuJoCo model/data pair.
 
@@ -127,7 +154,7 @@ class MujocoTask(Task):
             self.model.opt.timestep = self.dt
         self.data = mujoco.MjData(self.model)
         self.advanceables = [(self.model, self.data)]
-        self._renderer: Any = None
+        self._scene: SceneRenderer | None = None
         self.setup()
 
     def reset_data(self, keyframe: int | str | None = None) -> None:
@@ -153,16 +180,13 @@ class MujocoTask(Task):
         return gl_unavailable()
 
     def render(self) -> np.ndarray:
-        if self._renderer is None:
-            import mujoco
-
-            check_headless_gl()
-            self._renderer = mujoco.Renderer(self.model, self.render_height, self.render_width)
-        self._renderer.update_scene(self.data, camera=self.render_camera)
-        return self._renderer.render()
+        if self._scene is None:
+            self._scene = SceneRenderer(
+                self.model, self.render_width, self.render_height, self.render_camera
+            )
+        return self._scene.frame(self.data)
 
     def close(self) -> None:
-        renderer = getattr(self, "_renderer", None)
-        if renderer is not None:
-            renderer.close()
-            self._renderer = None
+        scene = getattr(self, "_scene", None)
+        if scene is not None:
+            scene.close()

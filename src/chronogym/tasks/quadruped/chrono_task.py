@@ -189,7 +189,7 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         # a MuJoCo copy of the robot: the reset pose's kinematics, and the pictures
         self._mj_model = mujoco.MjModel.from_xml_path(str(go1_xml_path()))
         self._mj_data = mujoco.MjData(self._mj_model)
-        self._renderer: Any = None
+        self._scene: Any = None  # a SceneRenderer of the MuJoCo copy, made on first render
         self._nominal_trunk_mass = float(robot.trunk.GetMass())
         self._trunk_ipos = robot.layout.trunk_ipos
         self._trunk_irot = robot.layout.trunk_irot
@@ -316,20 +316,19 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
     def render(self) -> np.ndarray:
         import mujoco
 
-        from chronogym.engines.mujoco import check_headless_gl
+        from chronogym.engines.mujoco import SceneRenderer
 
         m, d = self._mj_model, self._mj_data
-        if self._renderer is None:
-            check_headless_gl()
-            self._renderer = mujoco.Renderer(m, self.render_height, self.render_width)
+        if self._scene is None:
+            self._scene = SceneRenderer(
+                m, self.render_width, self.render_height, self.render_camera
+            )
         d.qpos[:] = self.mujoco_qpos()
         d.qvel[:] = 0.0
         mujoco.mj_forward(m, d)
-        self._renderer.update_scene(d, camera=self.render_camera)
-        return self._renderer.render()
+        return self._scene.frame(d)
 
     def close(self) -> None:
-        renderer = getattr(self, "_renderer", None)
-        if renderer is not None:
-            renderer.close()
-            self._renderer = None
+        scene = getattr(self, "_scene", None)
+        if scene is not None:
+            scene.close()
