@@ -16,7 +16,8 @@ so differences come from the implementations and the multibody engines around th
   soil node at the end).
 * ``go1``: the Go1 standing at its home pose with zero action for ``--stand-s`` seconds on
   each engine's soil (``terrain="soil"`` / ``terrain="scm"``): mean foot sinkage (foot sphere
-  bottom below z = 0) and base height.
+  bottom below z = 0), base height, and the wall time of ``env.step`` per decision (run this
+  on a quiet machine for that row).
 
 Chrono's SCM finds the bodies by ray casts into the collision system, so its result depends on
 that system. Chrono's default, Bullet in single precision, ends a ray-versus-shape cast once
@@ -40,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import time
 from pathlib import Path
 from typing import Any
 
@@ -231,14 +233,17 @@ def go1_standing(engine: str, preset: str, stand_s: float) -> dict[str, float]:
     task = env.unwrapped.task
     zero = np.zeros(12, dtype=np.float32)
     fell = False
-    for _ in range(round(stand_s / task.control_dt)):
+    decisions = round(stand_s / task.control_dt)
+    start = time.perf_counter()
+    for _ in range(decisions):
         terminated = env.step(zero)[2]
         fell = fell or terminated
+    step_s = (time.perf_counter() - start) / decisions
     feet_z = task.feet_positions()[:, 2]
     height = task._base_height()
     env.close()
     sinkage = float(np.mean(FOOT_RADIUS - feet_z))
-    return {"foot_sinkage": sinkage, "base_height": height, "fell": fell}
+    return {"foot_sinkage": sinkage, "base_height": height, "fell": fell, "step_s": step_s}
 
 
 ROW_KEYS = (
@@ -370,7 +375,11 @@ def main(argv: list[str] | None = None) -> None:
     rows += engine_rows(
         f"go1 standing {args.go1_soil}",
         stand,
-        (("foot_sinkage", "foot sinkage [mm]", 1e3), ("base_height", "base height [mm]", 1e3)),
+        (
+            ("foot_sinkage", "foot sinkage [mm]", 1e3),
+            ("base_height", "base height [mm]", 1e3),
+            ("step_s", "ms per decision", 1e3),
+        ),
     )
     columns = [
         Column("problem", 38, align="<", key="problem"),
