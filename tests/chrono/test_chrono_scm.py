@@ -63,7 +63,7 @@ def plate_on_soil(
 @pytest.mark.parametrize(
     ("collision", "tolerance"),
     # Bullet's ray casts also load a ring of nodes just outside the moving plate (about 1 cm
-    # off its edge: benchmarks/soil_cross_check.py), so the plate sinks ~9 % less.
+    # off its edge: benchmarks/soil/soil_cross_check.py), so the plate sinks ~9 % less.
     [("bullet", 0.10), ("multicore", 0.01)],
 )
 def test_plate_sinks_to_bekker_closed_form(chrono, vehicle, collision, tolerance):

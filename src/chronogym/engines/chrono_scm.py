@@ -72,7 +72,7 @@ class ChronoSCM:
     returns hits up to ~1 cm off a moving shape, and its collision envelope widens footprints
     (``RayHit`` corrects only the depth). For small shapes use a small envelope, and Chrono's
     multicore collision system (spheres, boxes) or Bullet built with
-    ``CH_USE_BULLET_DOUBLE=ON`` (``benchmarks/soil_cross_check.py``).
+    ``CH_USE_BULLET_DOUBLE=ON`` (``benchmarks/soil/soil_cross_check.py``).
 
     Args:
         system: the ``ChSystem`` (with a collision system already set).

@@ -90,7 +90,7 @@ class ChronoGo1Settings:
             ``"multicore"`` (needs Chrono built with Thrust). It matters on SCM soil, whose
             ray casts find the feet: Bullet's (single precision) hit up to ~1 cm outside a
             moving foot sphere, so its soil carries a wider footprint and the feet sink
-            less; multicore's are exact (``benchmarks/soil_cross_check.py``).
+            less; multicore's are exact (``benchmarks/soil/soil_cross_check.py``).
         envelope: Bullet's collision envelope [m] (``None``: 5 mm on rigid ground, where
             contacts are found this far out; 0.1 mm without it, on SCM soil, whose ray casts
             see every shape inflated by the envelope: a 5 mm envelope widens a foot's

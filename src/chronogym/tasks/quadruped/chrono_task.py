@@ -4,7 +4,7 @@ The same task as :class:`~.task.Go1VelocityTask` (MuJoCo): the observation, acti
 terms, command sampling, pushes and termination are the same code (:mod:`.velocity`), and
 the robot is built from the same MJCF numbers (:mod:`.chrono_model`). So a policy trained
 in one engine runs unchanged in the other (sim-to-sim: ``chronogym play quadruped CKPT
---engine chrono``, ``benchmarks/sim_to_sim.py``).
+--engine chrono``, ``benchmarks/chrono/sim_to_sim.py``).
 
 Terrain: ``"rigid"``, a fixed box with its top at z = 0, or ``"scm"``: Chrono's own
 ``SCMTerrain`` (``pychrono.vehicle``) with a chronogym soil preset (``soil``, default

@@ -20,7 +20,7 @@ Physics: ``dt`` = 10 ms, ``k`` = 2 (50 Hz policy), implicitfast integrator, elli
 cone with ``impratio`` 100: on a 25 deg slope its feet creep ~1 mm in 2 s against ~95 mm with
 the pyramidal cone. 10 ms stands as high and creeps about as little as 5 ms and 2 ms at ~0.5x the
 physics time of 5 ms, and a policy trained at 10 ms walks as well at 5 ms
-(``benchmarks/quadruped_physics.py``).
+(``benchmarks/rl/quadruped_physics.py``).
 Terrain: ``"rigid"`` (the floor plane) or ``"soil"``: SCM soil (``chronogym.terrain``, preset
 ``soil``, default Chrono's "firm") under the lower legs (calf capsule and foot sphere), in a
 ``soil_window`` x ``soil_window`` m window at ``soil_resolution`` that follows the trunk and
@@ -64,7 +64,7 @@ __all__ = ["PHYSICS_STEP", "REWARD_TERMS", "TERRAINS", "Go1VelocityTask"]
 #: Ground under the feet: the rigid floor, or SCM soil (``chronogym.terrain``) over it.
 TERRAINS: tuple[str, ...] = ("rigid", "soil")
 #: Default (dt, k) per terrain, 50 Hz policy either way. Rigid ground: 10 ms keeps the
-#: standing height and slope creep of 5 ms and 2 ms (``benchmarks/quadruped_physics.py``).
+#: standing height and slope creep of 5 ms and 2 ms (``benchmarks/rl/quadruped_physics.py``).
 #: The soil's force law is explicit
 #: and Chrono's soil stiffness (2e8 Pa/m) on a 20 mm foot needs dt <= 2 ms: at 5 ms the
 #: robot jitters down through the soil (and at 5 ms with a 10x softer soil the rigid policy

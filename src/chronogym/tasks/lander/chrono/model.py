@@ -123,7 +123,7 @@ class ChronoSettings:
             applies force only on overlap).
         margin: Bullet's collision margin [m].
         timestep: physics step [s] (``None``: ``params.timestep``).  Default design,
-            0.5 / 0.25 / 0.125 ms: see ``benchmarks/cross_engine.py --convergence``;
+            0.5 / 0.25 / 0.125 ms: see ``benchmarks/chrono/cross_engine.py --convergence``;
             0.25 ms is within about 1 % of 0.125 ms, 0.5 ms is not (explicit contact and
             friction forces; MuJoCo's implicit soft contacts are converged at 0.5 ms).
     """

@@ -14,8 +14,10 @@ import statistics
 import subprocess
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import Column, table
 
 #: (label, backend, worker_niceness) measured; None is Ray's default (15).

@@ -5,12 +5,12 @@ SerialVectorEnv, gymnasium's AsyncVectorEnv and RayVectorEnv (workers x envs per
 worker), each at several physics costs per env step (``k`` ticks of ``dt`` = 2 ms).
 Prints an aligned table and writes JSON (default ``benchmarks/results/throughput.json``).
 
-    python benchmarks/throughput.py            # default sweep, < 4 min on 2 cores
-    python benchmarks/throughput.py --quick    # smoke run, < 1 min
-    python benchmarks/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
-    python benchmarks/throughput.py --transports actor socket   # several RayVectorEnv transports
-    python benchmarks/throughput.py --breakdown   # one vector step split into phases (µs)
-    python benchmarks/throughput.py --background-load   # Ray worker priority beside a busy process
+    python benchmarks/vector/throughput.py            # default sweep, < 4 min on 2 cores
+    python benchmarks/vector/throughput.py --quick    # smoke run, < 1 min
+    python benchmarks/vector/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
+    python benchmarks/vector/throughput.py --transports actor socket   # several RayVectorEnv transports
+    python benchmarks/vector/throughput.py --breakdown   # one vector step split into phases (µs)
+    python benchmarks/vector/throughput.py --background-load   # Ray worker priority beside a busy process
 
 Counting: the cart-pole runs with ``terminate=False`` (the pole may fall; episodes end
 only by truncation after 500 steps), so every env step costs the same physics and no
@@ -54,6 +54,7 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import RESULTS, header, usable_cpus, write_json
 from throughput_breakdown import breakdown_record, run_breakdown
 from throughput_priority import format_priority, run_priority

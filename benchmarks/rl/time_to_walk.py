@@ -9,9 +9,9 @@ the first that passes; its wall time (from the run's ``progress.csv``) is the ru
 time-to-walk. Writes ``time_to_walk.json``, ``time_to_walk.csv`` (every checkpoint checked)
 and ``time_to_walk.png`` (commands passed and worst MSE against wall clock, one line per run).
 
-    python benchmarks/time_to_walk.py --configs serial:32:0:48:5:1 ray:32:0 --seeds 0 1
-    python benchmarks/time_to_walk.py --evaluate-only      # re-check the runs already there
-    python benchmarks/time_to_walk.py --configs ray:32:0:48 --seeds 2 --keep   # add a seed
+    python benchmarks/rl/time_to_walk.py --configs serial:32:0:48:5:1 ray:32:0 --seeds 0 1
+    python benchmarks/rl/time_to_walk.py --evaluate-only      # re-check the runs already there
+    python benchmarks/rl/time_to_walk.py --configs ray:32:0:48 --seeds 2 --keep   # add a seed
 
 A configuration is as in ``train_throughput.py``
 (``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``);
@@ -28,9 +28,11 @@ import argparse
 import csv
 import math
 import statistics
+import sys
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import RESULTS, header, pyplot, save_figure, settings, write_json
 from train_throughput import parse_config
 

@@ -16,10 +16,13 @@ import math
 import sys
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import Column, cpu_percent, header, settings, table
 from throughput_report import ok
 from throughput_timing import (

@@ -10,9 +10,12 @@ carries >= 1 ms of physics) and the JSON record.
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import Column, header, settings, table
 from throughput_sweep import VECTOR_BACKENDS, Result
 from throughput_timing import DEFAULT_TRANSPORT, DT, ENV_ID, SHAPE_COLUMNS, TASK_KWARGS

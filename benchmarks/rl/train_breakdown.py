@@ -16,8 +16,8 @@ synchronous (``policy_lag=0``) loop of ``chronogym.rl.trainer.train`` with every
 Prints a table (ms per iteration, medians over the iterations after ``--warmup``) and writes
 ``results/train_breakdown.json``.
 
-    python benchmarks/train_breakdown.py                       # ray:32:0 and serial:32:0
-    python benchmarks/train_breakdown.py --configs ray:16:0 ray:64:0:24 --iterations 20
+    python benchmarks/rl/train_breakdown.py                       # ray:32:0 and serial:32:0
+    python benchmarks/rl/train_breakdown.py --configs ray:16:0 ray:64:0:24 --iterations 20
 
 Configurations are ``train_throughput.py``'s, synchronous only (policy lag 0).
 """
@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import RESULTS, Column, header, settings, table, write_json
 from train_throughput import TrainConfig, parse_config
 

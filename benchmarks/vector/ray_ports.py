@@ -7,7 +7,7 @@ driver, the head's services and two worker actors all run), then reads Linux's s
 records whether Ray's token authentication is on and whether a dashboard or metrics endpoint
 is up. Linux only (it reads ``/proc``).
 
-    python benchmarks/ray_ports.py [--out benchmarks/results/ray_ports.json]
+    python benchmarks/vector/ray_ports.py [--out benchmarks/results/ray_ports.json]
 """
 
 from __future__ import annotations
@@ -16,8 +16,10 @@ import argparse
 import os
 import socket
 import struct
+import sys
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import RESULTS, Column, header, proc_cmdline, proc_stat, table, versions, write_json
 
 DEFAULT_OUT = RESULTS / "ray_ports.json"

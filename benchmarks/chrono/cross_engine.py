@@ -40,7 +40,7 @@ design within 2 % on a_max, E_abs, stroke and J; see benchmarks/README.md):
 * **Cost.**  A Chrono landing is 5-18x dearer: ~1 ms per 0.25 ms step (the sparse LU
   about 0.7 ms, the Python side of the tick 0.3 ms) against MuJoCo's ~0.1 ms per 0.5 ms.
 
-    python benchmarks/cross_engine.py [--convergence] [--out benchmarks/results/cross_engine.json]
+    python benchmarks/chrono/cross_engine.py [--convergence] [--out benchmarks/results/cross_engine.json]
 
 Needs PyChrono (``conda install projectchrono::pychrono -c conda-forge``); without it the
 script says so and exits with status 1.
@@ -58,6 +58,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import RESULTS, header, pyplot, save_figure, versions, write_json
 
 from chronogym.tasks.lander import DEFAULT_DESIGN, LanderDesign, LanderParams, LanderSim

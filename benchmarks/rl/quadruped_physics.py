@@ -14,8 +14,8 @@ impratio-100 settings (the walking criterion's commands and episodes, ``WalkingC
 a policy trained at one step that walks as well at the smaller ones has not learned to exploit
 the step's error.
 
-    python benchmarks/quadruped_physics.py [--out benchmarks/results/quadruped_physics.json]
-    python benchmarks/quadruped_physics.py --policy runs/quadruped/latest.pt
+    python benchmarks/rl/quadruped_physics.py [--out benchmarks/results/quadruped_physics.json]
+    python benchmarks/rl/quadruped_physics.py --policy runs/quadruped/latest.pt
 
 Prints a table and writes JSON. Timings are one core, best of ``--repeats``.
 """
@@ -24,12 +24,15 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import mujoco
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import RESULTS, Column, header, table, versions, write_json
 
 import chronogym  # noqa: F401  (sets the GL backend before mujoco rendering is touched)
