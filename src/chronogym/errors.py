@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from gymnasium.error import ClosedEnvironmentError
+import multiprocessing
+
+from gymnasium.error import AlreadyPendingCallError, ClosedEnvironmentError
 
 
 class ChronogymError(Exception):
@@ -23,3 +25,27 @@ class WorkerCallError(ChronogymError, RuntimeError):
 
 class VectorEnvClosedError(ChronogymError, ClosedEnvironmentError, RuntimeError):
     """A closed vector env was used (Gymnasium's ``ClosedEnvironmentError``)."""
+
+
+class EnvsInFlightError(ChronogymError, AlreadyPendingCallError, ValueError):
+    """Envs were sent (``send`` / ``step_async`` / ``async_reset``) and not yet received.
+
+    Raised by a second ``send`` to an env in flight, and by ``step``, ``reset``,
+    ``call``, ``get_attr``, ``set_attr`` and ``render`` while any env is in
+    flight. A Gymnasium ``AlreadyPendingCallError`` and a ``ValueError``.
+    """
+
+    def __init__(self, message: str, name: str = "step") -> None:
+        AlreadyPendingCallError.__init__(self, message, name)
+
+
+class RecvTimeoutError(ChronogymError, TimeoutError, multiprocessing.TimeoutError):
+    """``recv`` / ``step_wait`` ran out of time; the envs stay in flight (call it again).
+
+    Both the builtin ``TimeoutError`` and ``multiprocessing.TimeoutError`` (what
+    Gymnasium's ``AsyncVectorEnv.step_wait`` raises).
+    """
+
+
+class DisabledAutoresetError(ChronogymError, RuntimeError):
+    """An env that ended was stepped while ``autoreset_mode`` is DISABLED (reset it first)."""

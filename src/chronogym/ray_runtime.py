@@ -12,6 +12,8 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
+from chronogym.validation import check_int, check_number
+
 logger = logging.getLogger("chronogym")
 
 
@@ -45,16 +47,10 @@ def check_worker_niceness(worker_niceness: int | None) -> int | None:
     """``worker_niceness`` validated: None (Ray's default, 15) or an integer in -20..19."""
     if worker_niceness is None:
         return None
-    if (
-        isinstance(worker_niceness, bool)
-        or not isinstance(worker_niceness, int)
-        or not -20 <= worker_niceness <= 19
-    ):
-        raise ValueError(
-            f"worker_niceness={worker_niceness!r}: expected an integer nice value in -20..19 "
-            "(0: the driver's priority) or None for Ray's default (15)"
-        )
-    return worker_niceness
+    expected = (
+        "an integer nice value in -20..19 (0: the driver's priority) or None for Ray's default (15)"
+    )
+    return check_int("worker_niceness", worker_niceness, low=-20, high=19, expected=expected)
 
 
 def worker_niceness_env(worker_niceness: int | None) -> dict[str, str]:
@@ -160,8 +156,7 @@ def resolve_worker_cpus(num_cpus: float | None, num_workers: int) -> float:
             )
             return 0.0
         return min(1.0, share)
-    if isinstance(num_cpus, bool) or not isinstance(num_cpus, (int, float)) or num_cpus < 0:
-        raise ValueError(f"num_cpus={num_cpus!r}: expected a number >= 0 (fractions allowed)")
+    check_number("num_cpus", num_cpus, low=0, expected="a number >= 0 (fractions allowed)")
     if num_workers * num_cpus > total + 1e-9:
         raise ValueError(
             f"num_cpus={num_cpus} per worker x {num_workers} workers = "
@@ -177,8 +172,7 @@ def check_worker_gpus(num_gpus: float, num_workers: int) -> float:
     """Validate GPUs per worker against the cluster."""
     import ray
 
-    if isinstance(num_gpus, bool) or not isinstance(num_gpus, (int, float)) or num_gpus < 0:
-        raise ValueError(f"num_gpus={num_gpus!r}: expected a number >= 0 (fractions allowed)")
+    check_number("num_gpus", num_gpus, low=0, expected="a number >= 0 (fractions allowed)")
     total = float(ray.cluster_resources().get("GPU", 0.0))
     if num_gpus and num_workers * num_gpus > total + 1e-9:
         raise ValueError(

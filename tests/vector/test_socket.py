@@ -90,7 +90,7 @@ def test_send_recv_over_sockets_match_sync_per_env(ray_cluster, spin_us, plain_w
             vec._backend._disconnect(plain_worker)
         vec.reset(seed=0)
         vec.send(np.zeros((len(fns), 1), dtype=np.float32))
-        kinds = [type(call.handle).__name__ for _, call in sorted(vec._pending.items())]
+        kinds = [type(call.handle).__name__ for _, call in sorted(vec._in_flight.calls.items())]
         want = ["SockHandle"] * 3
         if plain_worker is not None:
             want[plain_worker] = "ObjectRef"

@@ -50,7 +50,8 @@ MOTOR_FUNCTION_SETTERS = (
 #: ``multicore`` (Chrono's own, needs Chrono built with Thrust). On SCM soil they differ in
 #: the ray casts that find the bodies: single-precision Bullet reports hits up to ~1 cm
 #: outside a moving shape, multicore's are exact for spheres and boxes (but its cylinder
-#: and capsule ray tests use the wrong axis in Chrono 10). See ``benchmarks/soil/soil_cross_check.py``.
+#: and capsule ray tests use the wrong axis in Chrono 10).
+#: See ``benchmarks/soil/soil_cross_check.py``.
 COLLISION_SYSTEMS: dict[str, str] = {"bullet": "Type_BULLET", "multicore": "Type_MULTICORE"}
 VECTOR_TYPES = ("ChVector3d", "ChVectorD")
 QUATERNION_TYPES = ("ChQuaterniond", "ChQuaternionD")

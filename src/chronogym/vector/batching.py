@@ -15,8 +15,10 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import VectorEnv
+from gymnasium.error import CustomSpaceError
 from gymnasium.vector.utils import concatenate, create_empty_array, iterate
+
+from chronogym.validation import show
 
 
 def split_actions(batched: spaces.Space, actions: Any, count: int) -> list[Any]:
@@ -25,10 +27,13 @@ def split_actions(batched: spaces.Space, actions: Any, count: int) -> list[Any]:
     try:
         rows = list(iterate(batched, actions))
     except Exception as error:
-        raise ValueError(
-            f"actions {_show(actions)} are not a batch of {count} actions: {error}; "
+        message = (
+            f"actions {show(actions)} are not a batch of {count} actions: {error}; "
             f"expected an element of {batched}"
-        ) from None
+        )
+        if isinstance(error, CustomSpaceError):  # Gymnasium's class for this case
+            raise CustomSpaceError(message) from None
+        raise ValueError(message) from None
     if len(rows) != count:
         raise ValueError(
             f"got {len(rows)} actions for {count} envs; expected one action per env "
@@ -50,27 +55,3 @@ def rows_of(part: Any) -> list[Any]:
     if isinstance(part, np.ndarray):
         return [row.copy() for row in part]
     return list(part)
-
-
-class _InfoBatch:
-    """Gymnasium's vector-info layout (``VectorEnv._add_info``) for ``num_envs`` rows."""
-
-    _add_info = VectorEnv._add_info
-
-    def __init__(self, num_envs: int) -> None:
-        self.num_envs = num_envs
-
-
-def batch_infos(infos_per_env: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Per-env info dicts as one vector info (arrays plus ``_key`` masks), Gymnasium-style."""
-    batch = _InfoBatch(len(infos_per_env))
-    infos: dict[str, Any] = {}
-    for i, info in enumerate(infos_per_env):
-        if info:
-            infos = batch._add_info(infos, info, i)
-    return infos
-
-
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from chronogym.validation import check_int, show
 from chronogym.vector.wire import EnvFactory
 
 
@@ -31,19 +32,13 @@ def normalize_env_fns(
         raise TypeError(
             f"env_fns={env_fns!r}: expected an env id, a factory, or a list of factories"
         )
-    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        raise ValueError(f"num_envs={count!r}: expected an integer >= 1")
+    check_int("num_envs", count, low=1)
     return fns
 
 
 def check_envs_per_worker(envs_per_worker: int, num_envs: int) -> int:
     """Validate ``envs_per_worker`` against ``num_envs``."""
-    if (
-        isinstance(envs_per_worker, bool)
-        or not isinstance(envs_per_worker, (int, np.integer))
-        or envs_per_worker < 1
-    ):
-        raise ValueError(f"envs_per_worker={envs_per_worker!r}: expected an integer >= 1")
+    check_int("envs_per_worker", envs_per_worker, low=1)
     if envs_per_worker > num_envs:
         raise ValueError(
             f"envs_per_worker={envs_per_worker} is larger than num_envs={num_envs}; "
@@ -55,49 +50,86 @@ def check_envs_per_worker(envs_per_worker: int, num_envs: int) -> int:
 def check_reset_mask(reset_mask: Any, num_envs: int) -> np.ndarray:
     """``options["reset_mask"]``: a bool array of shape (num_envs,) with a True value.
 
-    The exception types are Gymnasium's (TypeError for type and dtype, ValueError
-    for shape and an all-False mask).
+    Each error is Gymnasium's (its class and its text, as ``SyncVectorEnv`` raises
+    it), followed by what was expected.
     """
-    expected = f"expected a numpy bool array of shape ({num_envs},) with at least one True"
-    shown = _show(reset_mask)
+    expected = f"; expected a numpy bool array of shape ({num_envs},) with at least one True"
     if not isinstance(reset_mask, np.ndarray):
         raise TypeError(
-            f"options['reset_mask']={shown} is a {type(reset_mask).__name__}; {expected}"
+            f"`options['reset_mask']` must be a numpy array, got {type(reset_mask)}{expected}"
         )
     if reset_mask.shape != (num_envs,):
-        raise ValueError(f"options['reset_mask']={shown} has shape {reset_mask.shape}; {expected}")
+        raise ValueError(
+            f"`options['reset_mask']` must have shape `({num_envs},)`, got {reset_mask.shape}"
+            + expected
+        )
     if reset_mask.dtype != np.bool_:
-        raise TypeError(f"options['reset_mask']={shown} has dtype {reset_mask.dtype}; {expected}")
+        raise TypeError(
+            f"`options['reset_mask']` must have `dtype=np.bool_`, got {reset_mask.dtype}" + expected
+        )
     if not reset_mask.any():
-        raise ValueError(f"options['reset_mask']={shown} is all False; {expected}")
+        raise ValueError(
+            "`options['reset_mask']` must contain a boolean array with at least one True "
+            f"value, got reset_mask={reset_mask}{expected}"
+        )
     return reset_mask
-
-
-def _show(value: Any) -> str:
-    text = repr(value.tolist() if isinstance(value, np.ndarray) else value)
-    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def check_max_restarts(max_restarts: int) -> int:
     """Restarts allowed per env: an integer >= 0, or -1 for no limit."""
-    if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < -1:
-        raise ValueError(
-            f"max_restarts={max_restarts!r}: expected an integer >= 0, or -1 for no limit"
-        )
-    return max_restarts
+    expected = "an integer >= 0, or -1 for no limit"
+    return check_int("max_restarts", max_restarts, low=-1, expected=expected)
 
 
 def check_min_envs(min_envs: int | None, in_flight: int) -> int:
     """``recv``'s ``min_envs``: None (every env in flight) or 1..in_flight."""
     if min_envs is None:
         return in_flight
-    if (
-        isinstance(min_envs, bool)
-        or not isinstance(min_envs, (int, np.integer))
-        or not 1 <= min_envs <= in_flight
-    ):
+    expected = f"an integer with 1 <= min_envs <= {in_flight} (the envs in flight)"
+    return check_int("min_envs", min_envs, low=1, high=in_flight, expected=expected)
+
+
+def check_env_ids(env_ids: Any, num_envs: int) -> np.ndarray:
+    """``env_ids`` as a 1-D int64 array of distinct ids in ``0..num_envs-1`` (None: all)."""
+    if env_ids is None:
+        return np.arange(num_envs, dtype=np.int64)
+    array = np.asarray(env_ids)
+    if array.ndim == 0:
+        array = array.reshape(1)
+    if array.ndim != 1 or array.size == 0 or array.dtype.kind not in "iu":
         raise ValueError(
-            f"min_envs={min_envs!r}: expected an integer with 1 <= min_envs <= {in_flight} "
-            "(the envs in flight)"
+            f"env_ids={show(env_ids)}: expected a non-empty list or 1-D array of integer env "
+            f"ids in 0..{num_envs - 1}"
         )
-    return int(min_envs)
+    bad = sorted({int(i) for i in array if not 0 <= i < num_envs})
+    if bad:
+        raise ValueError(
+            f"env_ids={show(env_ids)}: ids {bad} are out of range; expected integers in "
+            f"0..{num_envs - 1} (num_envs={num_envs})"
+        )
+    values, counts = np.unique(array, return_counts=True)
+    if (counts > 1).any():
+        raise ValueError(
+            f"env_ids={show(env_ids)}: ids {values[counts > 1].tolist()} appear more than "
+            "once; expected each env at most once"
+        )
+    return array.astype(np.int64, copy=False)
+
+
+def workers_of(
+    env_ids: np.ndarray, slices: Sequence[tuple[int, int]], envs_per_worker: int
+) -> list[int]:
+    """The workers holding ``env_ids`` (ascending); the ids must cover each of them whole."""
+    chosen = set(env_ids.tolist())
+    workers = sorted({i // envs_per_worker for i in chosen})
+    for w in workers:
+        lo, hi = slices[w]
+        missing = [i for i in range(lo, hi) if i not in chosen]
+        if missing:
+            raise ValueError(
+                f"env_ids={show(env_ids)}: worker {w} holds envs {list(range(lo, hi))} but "
+                f"envs {missing} are missing; send() steps whole workers "
+                f"(envs_per_worker={envs_per_worker}), so expected every env of each worker "
+                "it touches"
+            )
+    return workers

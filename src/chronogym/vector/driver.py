@@ -23,24 +23,35 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import NoAsyncCallError
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from chronogym.actions import check_invalid_action_mode, prepare_box_action
-from chronogym.errors import VectorEnvClosedError, WorkerCallError, WorkerCrashLoopError
+from chronogym.errors import (
+    DisabledAutoresetError,
+    EnvsInFlightError,
+    VectorEnvClosedError,
+    WorkerCallError,
+    WorkerCrashLoopError,
+)
 from chronogym.seeding import restart_seed, vector_seeds
-from chronogym.vector.batching import batch_infos, join_obs, rows_of, split_actions
+from chronogym.vector.batching import join_obs, rows_of, split_actions
 from chronogym.vector.checks import (
+    check_env_ids,
     check_envs_per_worker,
     check_max_restarts,
+    check_min_envs,
     check_reset_mask,
     normalize_env_fns,
+    workers_of,
 )
-from chronogym.vector.pending import AsyncStepping, EnvsInFlightError, PendingCall
+from chronogym.vector.group import resolve_env_id
+from chronogym.vector.infos import batch_infos, join_infos
+from chronogym.vector.pending import InFlight, PendingCall
 from chronogym.vector.profile import StepProfile, now
 from chronogym.vector.wire import (
     Backend,
-    DisabledAutoresetError,
     EnvFactory,
     Outcome,
     Restart,
@@ -49,8 +60,11 @@ from chronogym.vector.wire import (
 
 logger = logging.getLogger("chronogym")
 
+#: Spaces whose batch of actions is one NumPy array (others batch to tuples or dicts).
+ARRAY_BATCHES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)
 
-class WorkerVectorEnv(AsyncStepping, VectorEnv):
+
+class WorkerVectorEnv(VectorEnv):
     """A ``gymnasium.vector.VectorEnv`` whose environments live in EnvGroup workers."""
 
     def __init__(
@@ -77,7 +91,7 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
         m = self.envs_per_worker
         self._slices = [(lo, min(lo + m, self.num_envs)) for lo in range(0, self.num_envs, m)]
         self.num_workers = len(self._slices)
-        self._env_fns = fns
+        self._env_fns = [resolve_env_id(fn) if isinstance(fn, str) else fn for fn in fns]
         self._env_kwargs = env_kwargs
         self._seed_roots = [int(np.random.SeedSequence().generate_state(1)[0])] * self.num_envs
         self._restart_counts = [0] * self.num_envs
@@ -93,7 +107,7 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
         self.metadata = {**metadata, "autoreset_mode": self.autoreset_mode}
         self.render_mode = render_mode
         self._last_parts: list[Any] = [None] * self.num_workers  # obs rows of each worker
-        self._pending: dict[int, PendingCall] = {}  # worker -> its call in flight
+        self._in_flight = InFlight(backend, self._slices)
         self._packed = isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
         self._action_batches = {self.num_envs: self.action_space}  # batch_space by env count
         self.profile: StepProfile | None = None  # see profile_steps()
@@ -277,6 +291,15 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
         ``actions`` is a batch with one row per env of ``workers``, in env order,
         or in the order whose ``argsort`` is ``order``.
         """
+        scalar = isinstance(actions, (int, float, np.generic)) or (
+            isinstance(actions, np.ndarray) and actions.ndim == 0
+        )
+        if scalar and isinstance(self.action_space, ARRAY_BATCHES):
+            # Gymnasium's class and text for a scalar, then what was expected
+            raise TypeError(
+                f"Unable to iterate over the following elements: {actions}; expected a batch "
+                f"with one action per env (an element of {self.action_space})"
+            )
         offsets, count = [], 0
         for w in workers:
             lo, hi = self._slices[w]
@@ -309,7 +332,6 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
             part, rew, term, trunc, infos, restarts = outcome.value[:6]
             if self._packed:
                 part, rew, term, trunc = self._unpack(part, rew, term, trunc, count)
-                infos = infos or [{}] * count
             self._note_restarts(restarts or [])
         else:
             if isinstance(outcome.value, DisabledAutoresetError):
@@ -318,7 +340,7 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
             rew = np.zeros(count, dtype=np.float64)
             term, trunc = np.zeros(count, dtype=np.bool_), np.ones(count, dtype=np.bool_)
         self._last_parts[w] = part
-        return StepPart(part, rew, term, trunc, list(infos))
+        return StepPart(part, rew, term, trunc, infos)
 
     def _unpack(self, obs: bytes, rew: bytes, term: bytes, trunc: bytes, count: int) -> tuple:
         space = self.single_observation_space
@@ -343,12 +365,118 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
         return last_part, [dict(flags) for _ in range(hi - lo)]
 
     def _check_idle(self, what: str) -> None:
-        if self._pending:
+        if self._in_flight:
             raise EnvsInFlightError(
                 f"{what}() called while envs {self.envs_in_flight.tolist()} are in flight; "
                 "expected no envs in flight: recv() them first",
                 what,
             )
+
+    # -- asynchronous stepping ---------------------------------------------------------
+    @property
+    def envs_in_flight(self) -> np.ndarray:
+        """Ids of the envs sent and not yet received (ascending)."""
+        return self._in_flight.env_ids()
+
+    def send(self, actions: Any, env_ids: Any = None) -> None:
+        """Start stepping the envs ``env_ids`` (default: all) with ``actions`` (one row each).
+
+        ``actions`` rows follow ``env_ids`` order. Calls are per worker, so
+        ``env_ids`` must hold every env of each worker it touches, and none of
+        them may be in flight already. Results come back through :meth:`recv`.
+        """
+        self._check_open()
+        ids = check_env_ids(env_ids, self.num_envs)
+        workers = workers_of(ids, self._slices, self.envs_per_worker)
+        busy = [w for w in workers if w in self._in_flight]
+        if busy:
+            envs = [i for w in busy for i in range(*self._slices[w])]
+            raise EnvsInFlightError(
+                f"env_ids={ids.tolist()}: envs {envs} are already in flight (sent, not yet "
+                "received); expected envs not in flight; call recv() first"
+            )
+        unreset = [
+            i for w in workers if self._last_parts[w] is None for i in range(*self._slices[w])
+        ]
+        if unreset:
+            raise RuntimeError(f"send() to envs {unreset} before their first reset(); reset first")
+        args = self._step_args(workers, actions, np.argsort(ids, kind="stable"))
+        self._in_flight.submit("step", self._step_method, workers, args)
+
+    def step_async(self, actions: Any) -> None:
+        """Start stepping every env (Gymnasium ``AsyncVectorEnv`` semantics); see step_wait."""
+        self._check_open()
+        self._check_idle("step_async")
+        self.send(actions)
+
+    def step_wait(
+        self, timeout: float | None = None
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Wait for the step started by :meth:`step_async`; the same numbers as ``step``."""
+        self._check_open()
+        if len(self._in_flight.calls) != self.num_workers or self._in_flight.kinds() != {"step"}:
+            raise NoAsyncCallError(
+                "step_wait() expects a step of every env in flight (from step_async()); envs "
+                f"in flight: {self.envs_in_flight.tolist()}",
+                "step",
+            )
+        return self.recv(min_envs=self.num_envs, timeout=timeout)[:5]
+
+    def async_reset(
+        self,
+        *,
+        seed: int | list[int | None] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> None:
+        """Start resetting every env (seeds as in ``reset``); results come through recv()."""
+        self._check_open()
+        self._check_idle("async_reset")
+        if options is not None and "reset_mask" in options:
+            raise ValueError(
+                "async_reset() resets every env; options['reset_mask'] is for reset(); "
+                "expected options without 'reset_mask'"
+            )
+        seeds, options, _ = self._prepare_reset(seed, options)
+        workers = list(range(self.num_workers))
+        args = [self._reset_args(w, seeds, options, None) for w in workers]
+        self._in_flight.submit("reset", "reset", workers, args)
+
+    def recv(
+        self, min_envs: int | None = None, timeout: float | None = None
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any], np.ndarray]:
+        """Results of at least ``min_envs`` envs in flight (default: all of them).
+
+        Returns as soon as the workers that answered hold ``min_envs`` envs,
+        with every env whose worker has answered by then:
+        ``(obs, rewards, terminations, truncations, infos, env_ids)``, rows in
+        ascending ``env_ids`` order, infos batched over those rows. A reset
+        comes back with reward 0 and both flags False.
+        """
+        self._check_open()
+        if not self._in_flight:
+            raise NoAsyncCallError(
+                "recv() called with no envs in flight; call send(), step_async() or "
+                "async_reset() first",
+                "step",
+            )
+        need = check_min_envs(min_envs, len(self.envs_in_flight))
+        answers = self._in_flight.collect(need, timeout)
+        workers = sorted(answers)
+        results = [self._pending_result(w, *answers[w]) for w in workers]
+        env_ids = np.concatenate([np.arange(*self._slices[w], dtype=np.int64) for w in workers])
+        return (*self._join_results(workers, results), env_ids)
+
+    def _pending_result(self, w: int, call: PendingCall, outcome: Outcome) -> StepPart:
+        """A step's or a reset's part; a failed reset is redone on a replacement worker."""
+        if call.kind == "step":
+            return self._step_result(w, outcome)
+        while not outcome.ok:
+            self._replace_worker(w, outcome.error)
+            (outcome,) = self._call_all([w], "reset", [call.args])
+        infos = self._take_reset(w, outcome.value)
+        count = len(infos)
+        zeros = np.zeros(count, dtype=np.bool_)
+        return StepPart(self._last_parts[w], np.zeros(count), zeros, zeros.copy(), infos)
 
     # -- joining -----------------------------------------------------------------------
     def _join_obs(self) -> Any:
@@ -365,7 +493,7 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
             np.concatenate([r.rewards for r in results]).astype(np.float64, copy=False),
             np.concatenate([r.terminations for r in results]).astype(np.bool_, copy=False),
             np.concatenate([r.truncations for r in results]).astype(np.bool_, copy=False),
-            batch_infos([info for r in results for info in r.infos]),
+            join_infos([r.infos for r in results], [len(r.rewards) for r in results]),
         )
 
     # -- generic access ----------------------------------------------------------------
@@ -427,7 +555,7 @@ class WorkerVectorEnv(AsyncStepping, VectorEnv):
     def close_extras(self, **kwargs: Any) -> None:
         if not self._started:
             return
-        self._pending.clear()  # calls in flight finish before close() reaches each worker
+        self._in_flight.clear()  # calls in flight finish before close() reaches each worker
         try:
             workers = list(range(self.num_workers))
             self._call_all(workers, "close", [()] * self.num_workers)

@@ -21,11 +21,14 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import concatenate, create_empty_array
 
+from chronogym.errors import DisabledAutoresetError
 from chronogym.seeding import restart_seed
-from chronogym.vector.wire import DisabledAutoresetError, EnvFactory, Restart
+from chronogym.vector.infos import to_columns
+from chronogym.vector.wire import EnvFactory, Restart
 
 
 def locked(method: Callable[..., Any]) -> Callable[..., Any]:
@@ -39,13 +42,36 @@ def locked(method: Callable[..., Any]) -> Callable[..., Any]:
     return run
 
 
-def build_env(env_fn: EnvFactory | str, env_kwargs: dict[str, Any] | None = None) -> gym.Env:
-    """Create one env from a factory or a registered id (importing chronogym registers ours)."""
-    if isinstance(env_fn, str):
-        import chronogym  # noqa: F401  (registers the chronogym/... ids)
+def resolve_env_id(env_id: str) -> EnvSpec:
+    """The registered spec of ``env_id`` (entry point and keyword arguments), looked up here.
 
+    Workers get the spec, not the id, so an env registered by the user's script
+    (which the workers never run) is made the same way there. Raises Gymnasium's
+    error for an unknown id at once, in the driver.
+    """
+    import chronogym  # noqa: F401  (registers the chronogym/... ids)
+
+    return gym.spec(env_id)
+
+
+def build_env(env_fn: EnvFactory | EnvSpec | str, env_kwargs: dict[str, Any] | None = None):
+    """Create one env from a factory, a registered spec or an id."""
+    if isinstance(env_fn, str):
+        env_fn = resolve_env_id(env_fn)
+    if not isinstance(env_fn, EnvSpec):
+        return env_fn()
+    try:
         return gym.make(env_fn, **(env_kwargs or {}))
-    return env_fn()
+    except ModuleNotFoundError as error:
+        raise ModuleNotFoundError(
+            f"env {env_fn.id!r} needs module {error.name!r}, which this worker process "
+            f"(pid {os.getpid()}) cannot import: {error}. Workers import an env's code by "
+            "module name: make it importable on every worker (install it as a package, or "
+            "put its folder on PYTHONPATH before Ray starts, or "
+            "ray.init(runtime_env={'working_dir': ...})), or register the env with the "
+            "class itself, defined in the script, instead of an import path",
+            name=error.name,
+        ) from error
 
 
 class EnvGroup:
@@ -53,7 +79,7 @@ class EnvGroup:
 
     def __init__(
         self,
-        env_fns: Sequence[EnvFactory | str],
+        env_fns: Sequence[EnvFactory | EnvSpec | str],
         indices: Sequence[int],
         autoreset_mode: AutoresetMode,
         seed_roots: Sequence[int],
@@ -212,7 +238,8 @@ class EnvGroup:
         """``step`` for Box spaces with raw bytes in and out (cheaper to send than arrays).
 
         Returns (obs, rewards, terminations, truncations) as bytes, then the
-        infos (None when all are empty) and the restarts (None when none). With
+        infos (:func:`~chronogym.vector.infos.to_columns`: None when all are
+        empty, else columns or per-env dicts) and the restarts (None when none). With
         ``timed``, a 7th item: (seconds of (de)serialization, seconds in ``step``).
         """
         start = time.perf_counter()
@@ -230,7 +257,7 @@ class EnvGroup:
             rewards.tobytes(),
             terminations.tobytes(),
             truncations.tobytes(),
-            infos if any(infos) else None,
+            to_columns(infos),
             restarts or None,
         )
         if not timed:

@@ -44,6 +44,7 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
+from chronogym.validation import check_number
 from chronogym.vector.actor_transport import ActorBackend
 from chronogym.vector.group import EnvGroup
 from chronogym.vector.wire import (
@@ -71,16 +72,11 @@ def check_spin_us(spin_us: float | None) -> float:
     """``spin_us`` validated (None: :data:`DEFAULT_SPIN_US`), in µs."""
     if spin_us is None:
         return DEFAULT_SPIN_US
-    if (
-        isinstance(spin_us, bool)
-        or not isinstance(spin_us, (int, float))
-        or not (0 <= spin_us <= 1e6)
-    ):
-        raise ValueError(
-            f"spin_us={spin_us!r}: expected None (default {DEFAULT_SPIN_US:g}) or microseconds "
-            "in [0, 1e6] to spin before a blocking socket read (0: never spin)"
-        )
-    return float(spin_us)
+    expected = (
+        f"None (default {DEFAULT_SPIN_US:g}) or microseconds in [0, 1e6] to spin before a "
+        "blocking socket read (0: never spin)"
+    )
+    return check_number("spin_us", spin_us, low=0, high=1e6, expected=expected)
 
 
 class AdaptiveSpin:

@@ -27,6 +27,9 @@ from typing import Any, Protocol
 import gymnasium as gym
 import numpy as np
 
+from chronogym.errors import DisabledAutoresetError
+from chronogym.vector.infos import InfoColumns
+
 EnvFactory = Callable[[], gym.Env]
 
 REQUEST = struct.Struct("<IB")  # action byte count, timed flag
@@ -52,7 +55,7 @@ class StepPart:
     rewards: np.ndarray
     terminations: np.ndarray
     truncations: np.ndarray
-    infos: list[dict[str, Any]]
+    infos: InfoColumns | list[dict[str, Any]] | None  # None: every env's info is empty
 
 
 @dataclass
@@ -69,10 +72,6 @@ class Restart:
 
     env_index: int
     error: str
-
-
-class DisabledAutoresetError(RuntimeError):
-    """Stepping an env that ended while autoreset is DISABLED (the caller's mistake)."""
 
 
 class Backend(Protocol):

@@ -1,0 +1,94 @@
+"""An id registered by the user's script works on the workers (they get the spec, not the id)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import gymnasium as gym
+import pytest
+
+from chronogym import RayVectorEnv, SerialVectorEnv
+
+SCRIPT = textwrap.dedent(
+    """
+    import gymnasium as gym
+    import numpy as np
+    import ray
+    from gymnasium import spaces
+
+    import chronogym
+    from chronogym import register_task
+
+
+    class Drift(chronogym.Task):
+        dt, k, max_episode_steps = 0.1, 1, 7
+
+        def init(self):
+            self.advanceables = []
+            self.observation_space = spaces.Box(-np.inf, np.inf, (1,), np.float64)
+            self.action_space = spaces.Box(-1, 1, (1,), np.float32)
+
+        def reset(self, rng, options):
+            self.x = float(rng.uniform(-1, 1))
+
+        def apply_action(self, action):
+            self.x += float(action[0])
+
+        def observe(self):
+            return np.array([self.x])
+
+        def reward(self, action, obs):
+            return -abs(self.x)
+
+        def terminated(self, obs):
+            return abs(self.x) > 3
+
+
+    register_task("me/Drift-v0", Drift)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+
+    def rollout(vec):
+        out = [vec.reset(seed=5)[0]]
+        for t in range(20):
+            out.append(vec.step(np.full((4, 1), 0.3 * np.sin(t), np.float32))[0])
+        vec.close()
+        return np.stack(out)
+
+    ray_run = rollout(chronogym.RayVectorEnv("me/Drift-v0", 4, envs_per_worker=2))
+    sync_run = rollout(gym.make_vec("me/Drift-v0", 4, vectorization_mode="sync"))
+    assert np.array_equal(ray_run, sync_run), (ray_run, sync_run)
+    print("same numbers", ray_run.shape)
+    """
+)
+
+
+def test_id_registered_in_the_users_script_runs_on_workers(tmp_path):
+    script = tmp_path / "user_script.py"
+    script.write_text(SCRIPT)
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=240, cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "same numbers (21, 4, 1)" in done.stdout
+
+
+@pytest.fixture
+def unimportable_id():
+    env_id = "me/Unimportable-v0"
+    gym.register(id=env_id, entry_point="not_a_module_anywhere:Env")
+    yield env_id
+    del gym.registry[env_id]
+
+
+def test_unknown_id_fails_in_the_driver_before_any_worker_starts():
+    with pytest.raises(gym.error.NameNotFound, match="NoSuchEnv"):
+        SerialVectorEnv("chronogym/NoSuchEnv-v0", 2)
+
+
+def test_unimportable_entry_point_names_the_module_and_the_fix(ray_cluster, unimportable_id):
+    with pytest.raises(ModuleNotFoundError, match="not_a_module_anywhere.*PYTHONPATH"):
+        SerialVectorEnv(unimportable_id, 2)
+    with pytest.raises(RuntimeError, match="not_a_module_anywhere.*PYTHONPATH"):
+        RayVectorEnv(unimportable_id, 2, envs_per_worker=1)
