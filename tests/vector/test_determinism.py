@@ -118,3 +118,12 @@ def test_call_get_attr_set_attr_close(ray_cluster):
     assert vec.closed
     with pytest.raises(RuntimeError, match="closed"):
         vec.reset()
+
+
+def test_a_first_reset_with_a_mask_names_the_envs_never_reset():
+    vec = SerialVectorEnv(ENV_ID, 3)
+    mask = np.array([True, False, True])
+    with pytest.raises(ValueError, match=r"leaves envs \[1\] unreset.*never reset"):
+        vec.reset(seed=[1, 2, 3], options={"reset_mask": mask})
+    vec.reset(seed=0)
+    vec.reset(options={"reset_mask": mask})  # fine once every env has been reset

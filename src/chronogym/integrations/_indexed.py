@@ -1,19 +1,23 @@
 """The env wrapper behind per-env ``indices=`` in the SB3 adapter (no SB3 import here).
 
 A Gymnasium vector env's ``call`` and ``set_attr`` reach every env. Each env built by
-``make_sb3_vec_env`` is wrapped in :class:`IndexedEnv`, which knows its own index, so one
-``call`` to every env can act on the chosen ones only. Ray workers import this module
-to rebuild the envs, so it must stay free of Stable-Baselines3 and torch.
+``make_sb3_vec_env``, ``RayVecEnv`` or ``SerialVecEnv`` is wrapped in :class:`IndexedEnv`,
+which knows its own index, so one ``call`` to every env can act on the chosen ones only.
+Ray workers import this module to rebuild the envs, so it must stay free of
+Stable-Baselines3 and torch.
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
 
 INDEX_ATTR = "chronogym_env_index"
 HOOK = "chronogym_sb3_op"
+OPS = ("call", "get", "has", "set", "is_wrapped", "identity")
 
 
 class IndexedEnv(gym.Wrapper):
@@ -26,9 +30,10 @@ class IndexedEnv(gym.Wrapper):
     def chronogym_sb3_op(self, op: str, indices: list[int], *args: Any) -> Any:
         """Run ``op`` if this env's index is in ``indices`` (else do nothing, return None).
 
-        ``op``: ``"call"`` (name, args, kwargs), ``"get"`` (name), ``"set"`` (name, value)
-        or ``"is_wrapped"`` (wrapper class). Attributes are looked up and set as
-        Gymnasium's vector envs do (``get_wrapper_attr`` / ``set_wrapper_attr``).
+        ``op``: ``"call"`` (name, args, kwargs), ``"get"`` (name), ``"has"`` (name),
+        ``"set"`` (name, value), ``"is_wrapped"`` (wrapper class) or ``"identity"`` (the
+        process id and the ``id`` of the unwrapped env). Attributes are looked up and set
+        as Gymnasium's vector envs do (``get_wrapper_attr`` / ``set_wrapper_attr``).
         """
         if self.chronogym_env_index not in indices:
             return None
@@ -37,6 +42,8 @@ class IndexedEnv(gym.Wrapper):
             return self.get_wrapper_attr(name)(*call_args, **call_kwargs)
         if op == "get":
             return self.get_wrapper_attr(args[0])
+        if op == "has":
+            return self.has_wrapper_attr(args[0])
         if op == "set":
             self.set_wrapper_attr(args[0], args[1])
             return None
@@ -47,7 +54,9 @@ class IndexedEnv(gym.Wrapper):
                     return True
                 env = env.env
             return False
-        raise ValueError(f"op={op!r}: expected 'call', 'get', 'set' or 'is_wrapped'")
+        if op == "identity":
+            return os.getpid(), id(self.unwrapped)
+        raise ValueError(f"op={op!r}: expected one of {OPS}")
 
 
 def make_indexed_env(env_id: str, index: int, env_kwargs: dict[str, Any] | None) -> IndexedEnv:
@@ -55,3 +64,14 @@ def make_indexed_env(env_id: str, index: int, env_kwargs: dict[str, Any] | None)
     import chronogym  # noqa: F401  (registers the chronogym/... ids in this process)
 
     return IndexedEnv(gym.make(env_id, **(env_kwargs or {})), index)
+
+
+def build_indexed_env(env_fn: Callable[[], gym.Env], index: int) -> IndexedEnv:
+    """``env_fn()`` wrapped in :class:`IndexedEnv` (``env_fn`` must return a Gymnasium env)."""
+    env = env_fn()
+    if not isinstance(env, gym.Env):
+        raise TypeError(
+            f"env_fns[{index}]={env_fn!r} returned {env!r} (a {type(env).__name__}); "
+            "expected a gymnasium.Env"
+        )
+    return IndexedEnv(env, index)

@@ -6,7 +6,12 @@
 ``dones = terminated | truncated``; an env that ended is reset within the step, and its
 info holds ``"terminal_observation"`` (the episode's last observation) and its reset info
 goes to ``reset_infos``; ``info["TimeLimit.truncated"] = truncated and not terminated``;
-infos are one dict per env; rewards are float32. :func:`make_sb3_vec_env` builds one.
+infos are one dict per env; rewards are float32. :func:`make_sb3_vec_env` builds one
+from an env id.
+
+:class:`RayVecEnv` and :class:`SerialVecEnv` take a list of env factories, as SB3's
+``SubprocVecEnv`` and ``DummyVecEnv`` do, so either can be ``vec_env_cls`` of SB3's
+``make_vec_env``; each env knows its index, so ``indices=`` reaches only the chosen envs.
 
 Requires Stable-Baselines3: ``pip install "chronogym[sb3]"``.
 """
@@ -16,12 +21,11 @@ from __future__ import annotations
 import functools
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
 try:
@@ -39,11 +43,25 @@ except ImportError as error:  # pragma: no cover - exercised in a subprocess by 
     ) from error
 
 import chronogym
-from chronogym.integrations._indexed import HOOK, INDEX_ATTR, make_indexed_env
+from chronogym.integrations._indexed import (
+    HOOK,
+    INDEX_ATTR,
+    build_indexed_env,
+    make_indexed_env,
+)
+from chronogym.integrations._sb3_batches import batch_actions, sb3_obs, split_info
 
-__all__ = ["BACKENDS", "SB3VecEnv", "make_sb3_vec_env"]
+__all__ = [
+    "BACKENDS",
+    "RayVecEnv",
+    "SB3VecEnv",
+    "SerialVecEnv",
+    "make_sb3_vec_env",
+    "split_info",
+]
 
 BACKENDS = ("ray", "serial", "sync", "async")
+SAME_STEP = AutoresetMode.SAME_STEP
 
 # chronogym reports a replaced worker in the top-level info, next to the reset info;
 # SB3 reads a step's info, so these are copied there too.
@@ -74,17 +92,25 @@ class SB3VecEnv(VecEnv):
 
     ``reset()`` uses (once) the seeds of :meth:`seed` (env i gets ``seed + i``) and the
     options of :meth:`set_options`, which must be the same for every env (a Gymnasium
-    vector env takes one options dict). ``step_async`` keeps the actions and
-    ``step_wait`` runs one ``step`` of the vector env.
+    vector env takes one options dict; :class:`RayVecEnv` and :class:`SerialVecEnv` take
+    one per env). ``step_async`` keeps the actions and
+    ``step_wait`` runs one ``step`` of the vector env. Actions are SB3's: an array with one
+    row per env, or one action per env (a list of dicts or tuples for Dict and Tuple
+    action spaces); they are batched with ``gymnasium.vector.utils``.
 
-    ``get_attr``, ``set_attr``, ``env_method`` and ``env_is_wrapped`` with ``indices``
-    act on those envs only when the envs were built by :func:`make_sb3_vec_env` (each
-    knows its index). With any other vector env: ``get_attr`` reads every env and picks;
-    ``set_attr`` reads the attribute of every env and writes it back unchanged to the
-    others (with Ray: an equal copy); ``env_method`` runs on every env and returns the
-    chosen results (a warning says so once per method name); ``env_is_wrapped`` matches
-    the wrapper classes' names in each env's ``str()`` (``<Monitor<TimeLimit<...>>>``).
+    ``get_attr``, ``set_attr``, ``env_method``, ``env_is_wrapped`` and ``has_attr`` act on
+    the chosen envs only when each env knows its index (built by :func:`make_sb3_vec_env`,
+    :class:`RayVecEnv` or :class:`SerialVecEnv`). With any other vector env: ``get_attr``
+    reads every env and picks; ``set_attr`` reads the attribute of every env and writes it
+    back unchanged to the others (with Ray: an equal copy); ``env_method`` runs on every
+    env and returns the chosen results (a warning says so once per method name);
+    ``env_is_wrapped`` matches the wrapper classes' names in each env's ``str()``
+    (``<Monitor<TimeLimit<...>>>``).
     """
+
+    #: Whether ``set_options`` may give envs different dicts (reset in groups by
+    #: ``reset_mask``, which chronogym's vector envs take).
+    _per_env_options = False
 
     def __init__(self, vector_env: gym.vector.VectorEnv) -> None:
         mode = _autoreset_mode(vector_env)
@@ -99,28 +125,43 @@ class SB3VecEnv(VecEnv):
         check_for_nested_spaces(observation_space)
         self.vector_env = vector_env
         n = int(vector_env.num_envs)
-        # Envs that know their index (make_sb3_vec_env) let indices= reach only those envs.
+        # Envs that know their index let indices= reach only those envs.
         # Probed without raising: an error in a call shuts down AsyncVectorEnv's workers.
         self._indexed = all(vector_env.call("has_wrapper_attr", INDEX_ATTR)) and list(
             vector_env.get_attr(INDEX_ATTR)
         ) == list(range(n))
         self._actions: Any = None
         self._warned: set[str] = set()
+        self._was_reset = False
         super().__init__(n, observation_space, vector_env.single_action_space)
 
     # -- stepping ----------------------------------------------------------------------
     def reset(self) -> VecEnvObs:
         """Reset every env (with the pending seeds and options, then forget them)."""
         seed = None if all(s is None for s in self._seeds) else list(self._seeds)
-        obs, info = self.vector_env.reset(seed=seed, options=self._common_options())
-        self.reset_infos = split_info(info, self.num_envs)
+        reset_infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        for k, (options, members) in enumerate(self._option_groups()):
+            if k == 0 and not self._was_reset:
+                # A vector env's first reset covers every env (masked ones would have no
+                # observation yet); the other groups' envs are reset again below.
+                members = list(range(self.num_envs))
+            elif len(members) < self.num_envs:
+                mask = np.zeros(self.num_envs, dtype=np.bool_)
+                mask[members] = True
+                options = {**(options or {}), "reset_mask": mask}
+            obs, info = self.vector_env.reset(seed=seed, options=options)
+            infos = split_info(info, self.num_envs)
+            for i in members:
+                reset_infos[i] = infos[i]
+        self.reset_infos = reset_infos
+        self._was_reset = True
         self._reset_seeds()
         self._reset_options()
         self._actions = None
-        return self._sb3_obs(obs)
+        return sb3_obs(self.observation_space, obs)
 
     def step_async(self, actions: np.ndarray) -> None:
-        """Keep ``actions`` (one row per env) for the next :meth:`step_wait`."""
+        """Keep ``actions`` (one row, or one action, per env) for the next :meth:`step_wait`."""
         self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
@@ -128,7 +169,8 @@ class SB3VecEnv(VecEnv):
         if self._actions is None:
             raise RuntimeError("step_wait() without step_async(actions) first")
         actions, self._actions = self._actions, None
-        obs, rewards, terminated, truncated, info = self.vector_env.step(actions)
+        batch = batch_actions(self.action_space, actions, self.num_envs)
+        obs, rewards, terminated, truncated, info = self.vector_env.step(batch)
         terminated = np.asarray(terminated, dtype=bool)
         truncated = np.asarray(truncated, dtype=bool)
         dones = terminated | truncated
@@ -137,7 +179,8 @@ class SB3VecEnv(VecEnv):
             infos[i] = self._ended(int(i), infos[i])
         for i, env_info in enumerate(infos):
             env_info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-        return self._sb3_obs(obs), np.asarray(rewards, dtype=np.float32), dones, infos
+        rewards = np.asarray(rewards, dtype=np.float32)
+        return sb3_obs(self.observation_space, obs), rewards, dones, infos
 
     def _ended(self, i: int, top: dict[str, Any]) -> dict[str, Any]:
         """The step info of env ``i`` that just ended; its reset info goes to reset_infos."""
@@ -155,14 +198,19 @@ class SB3VecEnv(VecEnv):
         step_info["terminal_observation"] = final_obs
         return step_info
 
-    def _sb3_obs(self, obs: Any) -> VecEnvObs:
-        """SB3's layout, copied (as DummyVecEnv does: a vector env may reuse its buffers)."""
-        space = self.observation_space
-        if isinstance(space, spaces.Dict):
-            return {key: np.array(obs[key]) for key in space.spaces}
-        if isinstance(space, spaces.Tuple):
-            return tuple(np.array(part) for part in obs)
-        return np.array(obs)
+    def _option_groups(self) -> list[tuple[dict[str, Any] | None, list[int]]]:
+        """The envs to reset together: (their options or None, their indices)."""
+        if not self._per_env_options:
+            return [(self._common_options(), list(range(self.num_envs)))]
+        groups: list[tuple[dict[str, Any], list[int]]] = []
+        for i, options in enumerate(self._options):
+            for shared, members in groups:
+                if options is shared or _equal(options, shared):
+                    members.append(i)
+                    break
+            else:
+                groups.append((options, [i]))
+        return [(options or None, members) for options, members in groups]
 
     def _common_options(self) -> dict[str, Any] | None:
         """The one options dict of ``set_options`` for every env (None: no options)."""
@@ -177,22 +225,28 @@ class SB3VecEnv(VecEnv):
         return first or None
 
     # -- attributes and methods --------------------------------------------------------
+    def has_attr(self, attr_name: str) -> bool:
+        """Whether every env has the attribute (a read of each, without calling it)."""
+        if self._indexed:
+            return all(self._on_envs("has", None, attr_name))
+        return super().has_attr(attr_name)
+
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         """The attribute of each env in ``indices`` (default: all), in that order."""
         chosen = self._indices(indices)
+        if self._indexed:
+            return self._on_envs("get", chosen, attr_name)
         if self._is_all(chosen):
             return list(self.vector_env.get_attr(attr_name))
-        if self._indexed:
-            return self._pick(self.vector_env.call(HOOK, "get", chosen, attr_name), chosen)
         return self._pick(self.vector_env.get_attr(attr_name), chosen)
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         """Set the attribute to ``value`` on each env in ``indices`` (default: all)."""
         chosen = self._indices(indices)
-        if self._is_all(chosen):
+        if self._indexed:
+            self._on_envs("set", chosen, attr_name, value)
+        elif self._is_all(chosen):
             self.vector_env.set_attr(attr_name, [value] * self.num_envs)
-        elif self._indexed:
-            self.vector_env.call(HOOK, "set", chosen, attr_name, value)
         else:
             try:
                 values = list(self.vector_env.get_attr(attr_name))
@@ -215,13 +269,10 @@ class SB3VecEnv(VecEnv):
     ) -> list[Any]:
         """Call the method on each env in ``indices`` (default: all); results in that order."""
         chosen = self._indices(indices)
+        if self._indexed:
+            return self._on_envs("call", chosen, method_name, method_args, method_kwargs)
         if self._is_all(chosen):
             return list(self.vector_env.call(method_name, *method_args, **method_kwargs))
-        if self._indexed:
-            results = self.vector_env.call(
-                HOOK, "call", chosen, method_name, method_args, method_kwargs
-            )
-            return self._pick(results, chosen)
         if method_name not in self._warned:
             self._warned.add(method_name)
             warnings.warn(
@@ -238,13 +289,16 @@ class SB3VecEnv(VecEnv):
         """Whether each env in ``indices`` (default: all) is wrapped in ``wrapper_class``."""
         chosen = self._indices(indices)
         if self._indexed:
-            results = self.vector_env.call(
-                HOOK, "is_wrapped", list(range(self.num_envs)), wrapper_class
-            )
-            return [bool(r) for r in self._pick(results, chosen)]
+            return [bool(r) for r in self._on_envs("is_wrapped", chosen, wrapper_class)]
         names = {cls.__name__ for cls in _subclasses(wrapper_class)}
         texts = self._pick(self.vector_env.call("__str__"), chosen)
         return [bool(names & set(re.findall(r"<([A-Za-z_]\w*)", text))) for text in texts]
+
+    def _on_envs(self, op: str, chosen: list[int] | None, *args: Any) -> list[Any]:
+        """Run ``op`` of :class:`~chronogym.integrations._indexed.IndexedEnv` on the chosen
+        envs (None: all) only; their results in ``chosen`` order."""
+        chosen = list(range(self.num_envs)) if chosen is None else chosen
+        return self._pick(self.vector_env.call(HOOK, op, chosen, *args), chosen)
 
     def _indices(self, indices: VecEnvIndices) -> list[int]:
         """``indices`` as a list of distinct env indices, checked."""
@@ -292,7 +346,99 @@ class SB3VecEnv(VecEnv):
         self.vector_env.close()
 
     def __repr__(self) -> str:
-        return f"SB3VecEnv({self.vector_env!r})"
+        return f"{type(self).__name__}({self.vector_env!r})"
+
+
+class _FactoryVecEnv(SB3VecEnv):
+    """An SB3VecEnv over a chronogym vector env built from ``env_fns``, each env indexed."""
+
+    _per_env_options = True
+
+    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], **vector_kwargs: Any) -> None:
+        fns = _indexed_env_fns(env_fns, vector_kwargs, type(self).__name__)
+        vector_env = self._vector_env(fns, vector_kwargs)
+        try:
+            identities = vector_env.call(HOOK, "identity", list(range(vector_env.num_envs)))
+            if len(set(identities)) != len(identities):
+                raise ValueError(
+                    f"{type(self).__name__}: the factories returned the same env instance for "
+                    "several envs; each factory must create a new env (e.g. lambda: "
+                    "gymnasium.make(env_id), not lambda: env)"
+                )
+            super().__init__(vector_env)
+        except BaseException:
+            vector_env.close()
+            raise
+
+    @staticmethod
+    def _vector_env(fns: list[Any], vector_kwargs: dict[str, Any]) -> gym.vector.VectorEnv:
+        raise NotImplementedError
+
+
+class RayVecEnv(_FactoryVecEnv):
+    """SB3's ``SubprocVecEnv`` on Ray: the envs of ``env_fns`` in :class:`chronogym.RayVectorEnv`.
+
+    Args:
+        env_fns: one factory per env, each returning a new ``gymnasium.Env`` (as for
+            ``SubprocVecEnv``); Ray pickles them with cloudpickle, closures included.
+        **vector_kwargs: for :class:`chronogym.RayVectorEnv` (``envs_per_worker``,
+            ``num_cpus``, ``address``, ``step_timeout``, ``transport``, ...);
+            ``autoreset_mode`` is ``SAME_STEP``.
+
+    Works as ``vec_env_cls`` of SB3's ``make_vec_env`` (``vec_env_kwargs`` go to the vector
+    env). Same numbers as ``DummyVecEnv`` on the same factories. Each env knows its index,
+    so ``get_attr``, ``set_attr``, ``env_method``, ``env_is_wrapped`` with ``indices``
+    touch only those envs (attributes and methods only some envs have included);
+    ``set_options`` may give each env its own dict. An env whose worker dies is rebuilt
+    and its episode ends truncated (``worker_restarted`` in its info).
+    """
+
+    @staticmethod
+    def _vector_env(fns: list[Any], vector_kwargs: dict[str, Any]) -> gym.vector.VectorEnv:
+        return chronogym.RayVectorEnv(fns, autoreset_mode=SAME_STEP, **vector_kwargs)
+
+
+class SerialVecEnv(_FactoryVecEnv):
+    """:class:`RayVecEnv`'s twin in this process (:class:`chronogym.SerialVectorEnv`).
+
+    Same arguments (``vector_kwargs`` for ``SerialVectorEnv``: ``max_restarts``,
+    ``invalid_action``), same numbers and the same per-env ``indices=`` as
+    :class:`RayVecEnv`, SB3's ``DummyVecEnv`` and ``SubprocVecEnv``; no Ray.
+    """
+
+    @staticmethod
+    def _vector_env(fns: list[Any], vector_kwargs: dict[str, Any]) -> gym.vector.VectorEnv:
+        return chronogym.SerialVectorEnv(fns, autoreset_mode=SAME_STEP, **vector_kwargs)
+
+
+def _indexed_env_fns(
+    env_fns: Any, vector_kwargs: dict[str, Any], owner: str
+) -> list[functools.partial]:
+    """``env_fns`` checked, each wrapped to build its env in an ``IndexedEnv``."""
+    expected = (
+        "expected a list of callables, each returning a new gymnasium.Env (as for "
+        "SubprocVecEnv); for an env id use make_vec_env(env_id, n_envs, "
+        f"vec_env_cls={owner}) or make_sb3_vec_env(env_id, num_envs)"
+    )
+    if isinstance(env_fns, (str, bytes)) or not isinstance(env_fns, Sequence):
+        raise ValueError(f"{owner}(env_fns={env_fns!r}): {expected}")
+    if len(env_fns) == 0:
+        raise ValueError(f"{owner}(env_fns={env_fns!r}): no env factories; {expected}")
+    for i, fn in enumerate(env_fns):
+        if not callable(fn):
+            raise ValueError(f"{owner}: env_fns[{i}]={fn!r} is not callable; {expected}")
+    mode = vector_kwargs.pop("autoreset_mode", SAME_STEP)
+    if not _is_same_step(mode):
+        raise ValueError(
+            f"{owner}(autoreset_mode={mode!r}): SB3 resets an env in the step that ends it, "
+            "so the mode is AutoresetMode.SAME_STEP; leave autoreset_mode out"
+        )
+    if "env_kwargs" in vector_kwargs:
+        raise ValueError(
+            f"{owner}(env_kwargs={vector_kwargs['env_kwargs']!r}): env_kwargs apply to env ids; "
+            "with factories, pass the keyword arguments inside each factory"
+        )
+    return [functools.partial(build_indexed_env, fn, i) for i, fn in enumerate(env_fns)]
 
 
 def make_sb3_vec_env(
@@ -316,14 +462,14 @@ def make_sb3_vec_env(
         raise ValueError(f"backend={backend!r}: expected one of {BACKENDS}")
     if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
         raise ValueError(f"num_envs={num_envs!r}: expected an integer >= 1")
-    mode = vector_kwargs.pop("autoreset_mode", AutoresetMode.SAME_STEP)
+    mode = vector_kwargs.pop("autoreset_mode", SAME_STEP)
     if not _is_same_step(mode):
         raise ValueError(
             f"autoreset_mode={mode!r}: make_sb3_vec_env needs AutoresetMode.SAME_STEP "
             "(SB3 resets an env in the step that ends it); leave autoreset_mode out"
         )
     env_fns = [functools.partial(make_indexed_env, env_id, i, env_kwargs) for i in range(num_envs)]
-    mode = AutoresetMode.SAME_STEP
+    mode = SAME_STEP
     if backend == "ray":
         vector_env: gym.vector.VectorEnv = chronogym.RayVectorEnv(
             env_fns, autoreset_mode=mode, **vector_kwargs
@@ -342,29 +488,6 @@ def make_sb3_vec_env(
     if seed is not None:
         venv.seed(seed)
     return venv
-
-
-def split_info(info: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:
-    """Gymnasium's batched info dict (``key`` and ``_key`` mask) as one dict per env."""
-    per_env: list[dict[str, Any]] = [{} for _ in range(num_envs)]
-    for key, value in info.items():
-        if isinstance(key, str) and key.startswith("_") and key[1:] in info:
-            continue  # the mask of info[key[1:]]
-        mask = info.get(f"_{key}")
-        if isinstance(value, dict):
-            parts = split_info(value, num_envs)
-        elif mask is None and not _per_env(value, num_envs):
-            parts = [value] * num_envs  # not batched: the same for every env
-        else:
-            parts = value
-        for i in range(num_envs):
-            if mask is None or mask[i]:
-                per_env[i][key] = parts[i]
-    return per_env
-
-
-def _per_env(value: Any, num_envs: int) -> bool:
-    return isinstance(value, np.ndarray) and value.ndim >= 1 and len(value) == num_envs
 
 
 def _equal(a: Any, b: Any) -> bool:

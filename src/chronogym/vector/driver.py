@@ -192,6 +192,7 @@ class WorkerVectorEnv(VectorEnv):
         self._check_open()
         self._check_idle("reset")
         seeds, options, mask = self._prepare_reset(seed, options)
+        self._check_first_reset(mask)
         workers = [
             w for w, (lo, hi) in enumerate(self._slices) if mask is None or mask[lo:hi].any()
         ]
@@ -210,6 +211,23 @@ class WorkerVectorEnv(VectorEnv):
                     failed.append(w)
             pending = failed
         return self._join_obs(), self._join_infos(infos_per_env)
+
+    def _check_first_reset(self, mask: np.ndarray | None) -> None:
+        """A masked reset needs every env it leaves alone to have been reset before."""
+        if mask is None:
+            return
+        never = [
+            i
+            for w, (lo, hi) in enumerate(self._slices)
+            if self._last_parts[w] is None
+            for i in range(lo, hi)
+            if not mask[i]
+        ]
+        if never:
+            raise ValueError(
+                f"options['reset_mask'] leaves envs {never} unreset, but they were never reset "
+                "and have no observation; expected a first reset() of every env (no mask)"
+            )
 
     def _prepare_reset(
         self, seed: int | list[int | None] | None, options: dict[str, Any] | None
