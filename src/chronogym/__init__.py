@@ -7,8 +7,9 @@ Public names are imported lazily so that ``import chronogym`` stays light
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from chronogym._lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -50,17 +51,7 @@ if TYPE_CHECKING:
     from chronogym.vector.serial import SerialVectorEnv
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'chronogym' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 def _can_load(library: str) -> bool:

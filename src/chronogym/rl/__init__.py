@@ -5,16 +5,17 @@ Public names are imported lazily: ``import chronogym.rl`` imports neither torch 
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from chronogym._lazy import lazy_exports
 
 _EXPORTS = {
     "RslRlVecEnv": "chronogym.rl.vecenv",
     "ppo_train_config": "chronogym.rl.config",
     "FINETUNE_PPO": "chronogym.rl.config",
     "train": "chronogym.rl.trainer",
-    "TrainResult": "chronogym.rl.trainer",
-    "load_policy": "chronogym.rl.trainer",
+    "TrainResult": "chronogym.rl.runner",
+    "load_policy": "chronogym.rl.checkpoint",
     "make_quadruped_vec_env": "chronogym.rl.quadruped",
     "train_quadruped": "chronogym.rl.quadruped",
     "play_quadruped": "chronogym.rl.quadruped",
@@ -39,6 +40,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
+    from chronogym.rl.checkpoint import load_policy
     from chronogym.rl.config import FINETUNE_PPO, ppo_train_config
     from chronogym.rl.evaluate import VideoRecorder, evaluate
     from chronogym.rl.quadruped import (
@@ -47,18 +49,9 @@ if TYPE_CHECKING:
         quadruped_train_config,
         train_quadruped,
     )
-    from chronogym.rl.trainer import TrainResult, load_policy, train
+    from chronogym.rl.runner import TrainResult
+    from chronogym.rl.trainer import train
     from chronogym.rl.vecenv import RslRlVecEnv
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'chronogym.rl' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -139,7 +139,7 @@ def train_quadruped(
 
     ``finetune`` swaps in the paper's conservative PPO settings (``FINETUNE_PPO``), as for
     the transfer from rigid to deformable terrain. ``policy_lag=1`` overlaps each PPO update
-    with the next rollout (:mod:`chronogym.rl.overlap`). ``update_threads``: torch threads of
+    with the next rollout (:mod:`chronogym.rl.collection`). ``update_threads``: torch threads of
     the synchronous update, while the simulations wait (default: every CPU this process may
     use, at most 8; with ``policy_lag=1`` the update runs on ``torch_threads``).
     ``task_kwargs``: further ``Go1VelocityTask`` arguments (e.g. the physics step
@@ -149,10 +149,11 @@ def train_quadruped(
     """
     from chronogym.rl.config import FINETUNE_PPO
     from chronogym.rl.overlap import check_policy_lag
-    from chronogym.rl.trainer import _check_budget, train
+    from chronogym.rl.runner import Budget
+    from chronogym.rl.trainer import train
     from chronogym.rl.vecenv import RslRlVecEnv
 
-    _check_budget(iterations, minutes)
+    Budget.of(iterations, minutes)  # checked before any worker starts
     check_policy_lag(policy_lag)
     check_engine(engine, terrain)
     if resume is not None and not Path(resume).is_file():
@@ -227,8 +228,8 @@ def play_quadruped(
     import gymnasium as gym
 
     import chronogym  # noqa: F401  (registers ids, picks a headless GL backend)
+    from chronogym.rl.checkpoint import load_policy
     from chronogym.rl.evaluate import DEFAULT_COMMANDS, evaluate, summarize
-    from chronogym.rl.trainer import load_policy
 
     env_id = check_engine(engine, terrain)
     render_mode = "rgb_array" if video is not None else None
