@@ -30,6 +30,10 @@ _EXPORTS = {
     "TaskDefinitionError": "chronogym.errors",
     "WorkerCrashLoopError": "chronogym.errors",
     "WorkerCallError": "chronogym.errors",
+    "VectorEnvClosedError": "chronogym.errors",
+    "EnvsInFlightError": "chronogym.errors",
+    "RecvTimeoutError": "chronogym.errors",
+    "DisabledAutoresetError": "chronogym.errors",
 }
 
 __all__ = [*sorted(_EXPORTS), "__version__"]
@@ -40,7 +44,11 @@ if TYPE_CHECKING:
     from chronogym.env import SimEnv
     from chronogym.errors import (
         ChronogymError,
+        DisabledAutoresetError,
+        EnvsInFlightError,
+        RecvTimeoutError,
         TaskDefinitionError,
+        VectorEnvClosedError,
         WorkerCallError,
         WorkerCrashLoopError,
     )

@@ -102,8 +102,12 @@ def test_action_maps_to_scaled_offsets_from_the_default_pose():
 
 
 def _terms(task: Go1VelocityTask) -> dict[str, float]:
+    """The reward terms of a step ending now: contacts read, terms computed, and the feet's
+    state carried over to the next step, as ``reward()`` does."""
     task._update_contacts()
-    return task.compute_reward_terms()
+    terms = task.compute_reward_terms()
+    task._update_feet_state()
+    return terms
 
 
 def test_tracking_terms_are_positive_and_peak_on_the_command():

@@ -200,23 +200,23 @@ class EnvGroup:
         per-env infos and the restarts.
         """
         n = len(self.envs)
-        rewards = np.zeros(n, dtype=np.float64)
-        terminations = np.zeros(n, dtype=np.bool_)
-        truncations = np.zeros(n, dtype=np.bool_)
-        infos: list[dict[str, Any]] = [{} for _ in range(n)]
-        restarts: list[Restart] = []
-        mode = self.autoreset_mode
         if len(actions) != n:
             raise ValueError(f"{len(actions)} actions for the {n} envs of this worker")
-        for j, (env, action) in enumerate(zip(self.envs, actions, strict=True)):
+        rewards, terminations, truncations = [0.0] * n, [False] * n, [False] * n
+        infos: list[dict[str, Any]] = [{}] * n
+        restarts: list[Restart] = []
+        mode = self.autoreset_mode
+        next_step, same_step = mode is AutoresetMode.NEXT_STEP, mode is AutoresetMode.SAME_STEP
+        ended = self.autoreset.tolist()
+        for j, env in enumerate(self.envs):
             try:
-                if mode == AutoresetMode.NEXT_STEP and self.autoreset[j]:
+                if ended[j] and next_step:
                     obs, info = self._reset_one(j, None, None)
                 else:
-                    if mode == AutoresetMode.DISABLED and self.autoreset[j]:
+                    if ended[j] and mode is AutoresetMode.DISABLED:
                         raise_disabled(self.indices[j])
-                    obs, rewards[j], terminations[j], truncations[j], info = env.step(action)
-                    if mode == AutoresetMode.SAME_STEP and (terminations[j] or truncations[j]):
+                    obs, rewards[j], terminations[j], truncations[j], info = env.step(actions[j])
+                    if same_step and (terminations[j] or truncations[j]):
                         final = {"final_obs": obs, "final_info": info}
                         obs, reset_info = self._reset_one(j, None, None)
                         info = {**final, **reset_info}
@@ -230,8 +230,10 @@ class EnvGroup:
                 info.update(worker_restarted=True, worker_error=error)
             self.last_obs[j] = obs
             infos[j] = info
-        self.autoreset = np.logical_or(terminations, truncations)
-        return list(self.last_obs), rewards, terminations, truncations, infos, restarts
+        out = _as_array(rewards, np.float64), _as_array(terminations, np.bool_)
+        flags = (*out, _as_array(truncations, np.bool_))
+        self.autoreset = np.logical_or(flags[1], flags[2])
+        return list(self.last_obs), *flags, infos, restarts
 
     @locked
     def step_packed(self, action_bytes: bytes | memoryview, timed: bool = False) -> tuple:
@@ -292,6 +294,16 @@ class EnvGroup:
     def close(self) -> None:
         for env in self.envs:
             env.close()
+
+
+def _as_array(values: list[Any], dtype: type) -> np.ndarray:
+    """Per-env scalars as one array, each converted as ``array[j] = value`` would."""
+    array = np.array(values, dtype=dtype)
+    if array.shape != (len(values),):  # e.g. rewards given as 1-element arrays
+        array = np.zeros(len(values), dtype=dtype)
+        for j, value in enumerate(values):
+            array[j] = value
+    return array
 
 
 def raise_disabled(env_index: int) -> None:

@@ -75,13 +75,14 @@ def to_columns(infos: Sequence[dict[str, Any]]) -> InfoColumns | Infos | None:
         return None
     first = infos[0]
     keys = first.keys()
-    if any(info.keys() != keys for info in infos):
-        return list(infos)
+    for info in infos:
+        if info.keys() != keys:
+            return list(infos)
     kinds, data = [], []
     for key, value in first.items():
         kind = type(value)
         values = [info[key] for info in infos]
-        if not _is_scalar_type(kind) or any(type(v) is not kind for v in values):
+        if not _is_scalar_type(kind) or len(set(map(type, values))) != 1:
             return list(infos)
         try:
             column = np.array(values, dtype=kind)
@@ -116,12 +117,12 @@ def join_infos(parts: Sequence[InfoColumns | Infos | None], counts: Sequence[int
 def _join_columns(parts: Sequence[InfoColumns]) -> dict[str, Any]:
     """Columns with the same keys and dtypes: one array (and an all-True mask) per key."""
     total = sum(p.count for p in parts)
+    mask = np.ones(total, dtype=np.bool_)
     out: dict[str, Any] = {}
-    for k, key in enumerate(parts[0].keys):
-        joined = b"".join(p.data[k] for p in parts)
-        dtype = parts[0].kinds[k].removeprefix(PYTHON)
-        out[key] = np.frombuffer(joined, dtype=dtype).copy()
-        out[f"_{key}"] = np.ones(total, dtype=np.bool_)
+    for k, (key, kind) in enumerate(zip(parts[0].keys, parts[0].kinds, strict=True)):
+        joined = parts[0].data[k] if len(parts) == 1 else b"".join([p.data[k] for p in parts])
+        out[key] = np.frombuffer(joined, dtype=kind.removeprefix(PYTHON)).copy()
+        out[f"_{key}"] = mask.copy()
     return out
 
 

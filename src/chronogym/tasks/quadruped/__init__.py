@@ -4,7 +4,7 @@
 keyframe; the constants describe its joint order (FR, FL, RR, RL; hip, thigh, calf per leg).
 ``Go1VelocityTask`` (Gymnasium id ``chronogym/Go1Velocity-v0``) is the paper's locomotion task;
 ``ChronoGo1VelocityTask`` (``chronogym/ChronoGo1Velocity-v0``, needs PyChrono) is the same task
-in Project Chrono, sharing ``Go1VelocityBase``'s code.
+in Project Chrono, sharing ``Go1VelocityBase``'s code and its settings, ``Go1TaskConfig``.
 """
 
 from chronogym.tasks.quadruped.chrono_model import ChronoGo1Settings
@@ -15,6 +15,7 @@ from chronogym.tasks.quadruped.config import (
     OBS_SLICES,
     CommandRanges,
     DomainRandomization,
+    Go1TaskConfig,
     RewardWeights,
 )
 from chronogym.tasks.quadruped.model import *  # noqa: F403  (re-exported names)
@@ -31,6 +32,7 @@ __all__ = [
     "ChronoGo1VelocityTask",
     "CommandRanges",
     "DomainRandomization",
+    "Go1TaskConfig",
     "Go1VelocityBase",
     "Go1VelocityTask",
     "RewardWeights",

@@ -41,11 +41,10 @@ from chronogym.tasks.quadruped.chrono_model import (
     quat_from_matrix,
     quat_to_matrix,
 )
-from chronogym.tasks.quadruped.config import CommandRanges, DomainRandomization, RewardWeights
+from chronogym.tasks.quadruped.config import Go1TaskConfig, obs_group
 from chronogym.tasks.quadruped.model import (
     CAMERA_NAME,
     DEFAULT_JOINT_POS,
-    HOME_BASE_HEIGHT,
     KP,
     KV,
     go1_xml_path,
@@ -70,6 +69,10 @@ TRUNK_DOMAIN = ((0.0, 0.0, 0.0), (0.62, 0.40, 0.30))
 FOOT_CONTACT_FORCE = 1.0
 #: The trunk or a hip touches the ground when its contact force exceeds this [N].
 BASE_CONTACT_FORCE = 1.0
+_ANG_VEL = obs_group("base_ang_vel")
+_GRAVITY = obs_group("projected_gravity")
+_JOINT_POS = obs_group("joint_pos")
+_JOINT_VEL = obs_group("joint_vel")
 
 
 class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
@@ -83,42 +86,21 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
     def __init__(
         self,
         *,
+        config: Go1TaskConfig | None = None,
         dt: float | None = None,
         k: int | None = None,
-        max_episode_steps: int | None = 1000,
-        commands: CommandRanges | None = None,
-        rewards: RewardWeights | None = None,
-        randomization: DomainRandomization | None = None,
-        action_scale: float = 0.25,
-        action_clip: float = 10.0,
-        max_tilt: float = 1.0,
-        base_height_target: float = HOME_BASE_HEIGHT,
-        air_time_threshold: float = 0.25,
-        reset_joint_noise: float = 0.1,
-        only_positive_rewards: bool = True,
-        kp: float | None = 35.0,
-        kd: float | None = 0.5,
         terrain: str = "rigid",
         soil: SoilParameters | str = "firm",
         soil_resolution: float = 0.02,
         soil_extent: float = 20.0,
         settings: ChronoGo1Settings | None = None,
+        **options: Any,
     ) -> None:
-        self._init_tracking(
-            max_episode_steps=max_episode_steps,
-            commands=commands,
-            rewards=rewards,
-            randomization=randomization,
-            action_scale=action_scale,
-            action_clip=action_clip,
-            max_tilt=max_tilt,
-            base_height_target=base_height_target,
-            air_time_threshold=air_time_threshold,
-            reset_joint_noise=reset_joint_noise,
-            only_positive_rewards=only_positive_rewards,
-            kp=kp,
-            kd=kd,
-        )
+        """``config``: the settings shared with the MuJoCo Go1; ``options``: any of its fields
+        by name (``max_tilt=0.8``), replacing the value in ``config``. The rest are Chrono's:
+        physics step ``dt`` x ``k`` (``None``: by contact method and terrain), the terrain with
+        its soil, and the model's ``settings``."""
+        self._init_tracking(config, options)
         if terrain not in CHRONO_TERRAINS:
             raise ValueError(
                 f"terrain={terrain!r}: expected one of {', '.join(CHRONO_TERRAINS)} for the "
@@ -176,8 +158,8 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         self.servos = Go1Servos(
             robot.motors,
             robot.torque_functions,
-            kp=KP if self.kp is None else self.kp,
-            kd=KV if self.kd is None else self.kd,
+            kp=KP if self.config.kp is None else self.config.kp,
+            kd=KV if self.config.kd is None else self.config.kd,
             ranges=robot.layout.joint_ranges,
             joint_inertia=robot.layout.joint_inertia,
             limit_time_constant=self.settings.limit_time_constant,
@@ -261,10 +243,10 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         pos, rot = self.base_frame()
         omega = body_ang_vel(trunk)  # world frame
         v_origin = body_lin_vel(trunk) + np.cross(omega, pos - body_pos(trunk))
-        raw[0:3] = rot.T @ omega
-        raw[3:6] = -rot[2]
-        raw[9:21] = self.servos.angles() - DEFAULT_JOINT_POS
-        raw[21:33] = self.servos.rates()
+        raw[_ANG_VEL] = rot.T @ omega
+        raw[_GRAVITY] = -rot[2]
+        raw[_JOINT_POS] = self.servos.angles() - DEFAULT_JOINT_POS
+        raw[_JOINT_VEL] = self.servos.rates()
         self.base_lin_vel = rot.T @ v_origin
         self._base_z = float(pos[2])
 

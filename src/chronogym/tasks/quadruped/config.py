@@ -1,7 +1,9 @@
 """Settings of the Go1 velocity-tracking task: commands, reward weights, randomization.
 
-Every setting is a small frozen dataclass with the defaults the documented training run used,
-so a variant is ``Go1VelocityTask(rewards=RewardWeights(feet_air_time=0.5))``.
+Every setting is a small frozen dataclass with the defaults the documented training run used.
+:class:`Go1TaskConfig` holds what the MuJoCo and the Chrono Go1 share, so a variant is
+``Go1VelocityTask(config=Go1TaskConfig(rewards=RewardWeights(feet_air_time=0.5)))`` or, field
+by field, ``Go1VelocityTask(rewards=RewardWeights(feet_air_time=0.5))``.
 """
 
 from __future__ import annotations
@@ -9,6 +11,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from chronogym.tasks.quadruped.model import HOME_BASE_HEIGHT
 
 #: Scale of each observation group (observation = raw value x scale).
 OBS_SCALES: dict[str, float | tuple[float, float, float]] = {
@@ -31,6 +38,12 @@ OBS_SLICES: dict[str, tuple[int, int]] = {
 }
 OBS_DIM = 45
 ACTION_DIM = 12
+
+
+def obs_group(name: str) -> slice:
+    """The slice of observation group ``name`` (an ``OBS_SLICES`` key) in the 45-vector."""
+    start, stop = OBS_SLICES[name]
+    return slice(start, stop)
 
 
 def _check_range(name: str, bounds: tuple[float, float]) -> None:
@@ -129,3 +142,84 @@ class DomainRandomization:
             raise ValueError(f"push_interval_s={self.push_interval_s!r}: expected None or > 0")
         if not self.push_velocity >= 0:
             raise ValueError(f"push_velocity={self.push_velocity!r}: expected >= 0")
+
+
+def _is_number(value: Any) -> bool:
+    return (
+        not isinstance(value, (bool, np.bool_))
+        and isinstance(value, (int, float, np.integer, np.floating))
+        and math.isfinite(value)
+    )
+
+
+def _check_type(name: str, value: Any, kind: type, optional: bool = False) -> None:
+    if not (isinstance(value, kind) or (optional and value is None)):
+        expected = f"None or a {kind.__name__}" if optional else f"a {kind.__name__}"
+        raise ValueError(f"{name}={value!r}: expected {expected}")
+
+
+@dataclass(frozen=True)
+class Go1TaskConfig:
+    """The settings the MuJoCo and the Chrono Go1 velocity tasks share, checked when made.
+
+    Each field is also a keyword argument of both tasks (``Go1VelocityTask(max_tilt=0.8)``
+    is ``Go1VelocityTask(config=Go1TaskConfig(max_tilt=0.8))``); the physics step, terrain and
+    engine options are the engine's own arguments.
+    """
+
+    #: Decisions per episode before the time limit truncates it; ``None``: no limit.
+    max_episode_steps: int | None = 1000
+    #: Ranges the velocity command is drawn from.
+    commands: CommandRanges = dataclasses.field(default_factory=CommandRanges)
+    #: Weight of each reward term.
+    rewards: RewardWeights = dataclasses.field(default_factory=RewardWeights)
+    #: Per-episode friction, trunk mass and pushes; ``None``: off.
+    randomization: DomainRandomization | None = None
+    #: Joint target = default pose + ``action_scale`` x action [rad].
+    action_scale: float = 0.25
+    #: Bound of the action space (each component in [-clip, clip]).
+    action_clip: float = 10.0
+    #: The episode ends when the base tilts more than this from upright [rad].
+    max_tilt: float = 1.0
+    #: Base height the ``base_height`` term pulls towards [m].
+    base_height_target: float = HOME_BASE_HEIGHT
+    #: A swing longer than this earns the ``feet_air_time`` term [s], in [0, 5).
+    air_time_threshold: float = 0.25
+    #: Joint angles start uniform within +- this of the home pose [rad], in [0, 0.5].
+    reset_joint_noise: float = 0.1
+    #: Clip the step reward at 0 from below (legged_gym's ``only_positive_rewards``).
+    only_positive_rewards: bool = True
+    #: Servo stiffness [N m/rad]; ``None``: the model's (100).
+    kp: float | None = 35.0
+    #: Servo damping [N m s/rad]; ``None``: the model's (2).
+    kd: float | None = 0.5
+
+    def __post_init__(self) -> None:
+        steps = self.max_episode_steps
+        if steps is not None and (
+            isinstance(steps, (bool, np.bool_))
+            or not isinstance(steps, (int, np.integer))
+            or steps < 1
+        ):
+            raise ValueError(f"max_episode_steps={steps!r}: expected None or an integer >= 1")
+        _check_type("commands", self.commands, CommandRanges)
+        _check_type("rewards", self.rewards, RewardWeights)
+        _check_type("randomization", self.randomization, DomainRandomization, optional=True)
+        for name in ("action_scale", "action_clip", "max_tilt", "base_height_target"):
+            value = getattr(self, name)
+            if not (_is_number(value) and value > 0):
+                raise ValueError(f"{name}={value!r}: expected a finite float > 0")
+        for name in ("kp", "kd"):
+            value = getattr(self, name)
+            if value is not None and not (_is_number(value) and value >= 0):
+                raise ValueError(f"{name}={value!r}: expected None (the model's) or a float >= 0")
+        threshold = self.air_time_threshold
+        if not (_is_number(threshold) and 0 <= threshold < 5):
+            raise ValueError(f"air_time_threshold={threshold!r}: expected in [0, 5) s")
+        noise = self.reset_joint_noise
+        if not (_is_number(noise) and 0 <= noise <= 0.5):
+            raise ValueError(f"reset_joint_noise={noise!r}: expected in [0, 0.5] rad")
+        if not isinstance(self.only_positive_rewards, (bool, np.bool_)):
+            raise ValueError(
+                f"only_positive_rewards={self.only_positive_rewards!r}: expected True or False"
+            )

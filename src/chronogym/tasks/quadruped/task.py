@@ -1,5 +1,7 @@
 """Go1 velocity tracking: follow a commanded planar velocity and yaw rate on flat ground.
 
+Settings: ``Go1TaskConfig`` (shared with the Chrono Go1; each field is also a keyword argument)
+plus MuJoCo's own: the physics step, the friction cone and the terrain.
 Observation (float32, 45), each group scaled by ``OBS_SCALES`` (layout in ``OBS_SLICES``):
 base angular velocity (body frame, 3), projected gravity (body frame, 3), command (vx, vy,
 yaw rate, 3), joint position offsets from the default pose (12), joint velocities (12),
@@ -38,17 +40,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from chronogym.engines.mujoco import MujocoTask
-from chronogym.tasks.quadruped.config import (
-    CommandRanges,
-    DomainRandomization,
-    RewardWeights,
-)
+from chronogym.tasks.quadruped.config import Go1TaskConfig, obs_group
 from chronogym.tasks.quadruped.model import (
     BASE_BODY_NAME,
     CAMERA_NAME,
     DEFAULT_JOINT_POS,
     FOOT_GEOM_NAMES,
-    HOME_BASE_HEIGHT,
     HOME_KEYFRAME,
     LEG_NAMES,
     go1_xml_path,
@@ -70,6 +67,10 @@ TERRAINS: tuple[str, ...] = ("rigid", "soil")
 #: robot jitters down through the soil (and at 5 ms with a 10x softer soil the rigid policy
 #: fell in 3 of 4 episodes; at 2 ms it kept walking on "firm", as at 1 ms).
 PHYSICS_STEP: dict[str, tuple[float, int]] = {"rigid": (0.01, 2), "soil": (0.002, 10)}
+_ANG_VEL = obs_group("base_ang_vel")
+_GRAVITY = obs_group("projected_gravity")
+_JOINT_POS = obs_group("joint_pos")
+_JOINT_VEL = obs_group("joint_vel")
 
 
 class Go1VelocityTask(Go1VelocityBase, MujocoTask):
@@ -80,43 +81,22 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
     def __init__(
         self,
         *,
+        config: Go1TaskConfig | None = None,
         dt: float | None = None,
         k: int | None = None,
-        max_episode_steps: int | None = 1000,
-        commands: CommandRanges | None = None,
-        rewards: RewardWeights | None = None,
-        randomization: DomainRandomization | None = None,
-        action_scale: float = 0.25,
-        action_clip: float = 10.0,
-        max_tilt: float = 1.0,
-        base_height_target: float = HOME_BASE_HEIGHT,
-        air_time_threshold: float = 0.25,
-        reset_joint_noise: float = 0.1,
         cone: str = "elliptic",
         impratio: float = 100.0,
-        only_positive_rewards: bool = True,
-        kp: float | None = 35.0,
-        kd: float | None = 0.5,
         terrain: str = "rigid",
         soil: SoilParameters | str = "firm",
         soil_resolution: float = 0.01,
         soil_window: float = 3.0,
+        **options: Any,
     ) -> None:
-        self._init_tracking(
-            max_episode_steps=max_episode_steps,
-            commands=commands,
-            rewards=rewards,
-            randomization=randomization,
-            action_scale=action_scale,
-            action_clip=action_clip,
-            max_tilt=max_tilt,
-            base_height_target=base_height_target,
-            air_time_threshold=air_time_threshold,
-            reset_joint_noise=reset_joint_noise,
-            only_positive_rewards=only_positive_rewards,
-            kp=kp,
-            kd=kd,
-        )
+        """``config``: the settings shared with the Chrono Go1; ``options``: any of its fields
+        by name (``max_tilt=0.8``), replacing the value in ``config``. The rest are MuJoCo's:
+        physics step ``dt`` x ``k`` (``None``: ``PHYSICS_STEP`` of the terrain), friction
+        ``cone`` and ``impratio``, and the terrain with its soil."""
+        self._init_tracking(config, options)
         if not (isinstance(impratio, (int, float)) and math.isfinite(impratio) and impratio >= 1):
             raise ValueError(f"impratio={impratio!r}: expected a float >= 1")
         if terrain not in TERRAINS:
@@ -161,11 +141,12 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
             else mujoco.mjtCone.mjCONE_ELLIPTIC
         )
         model.opt.impratio = self.impratio
-        if self.kp is not None:  # position servo: force = kp (ctrl - q) - kv qdot
-            model.actuator_gainprm[:, 0] = self.kp
-            model.actuator_biasprm[:, 1] = -self.kp
-        if self.kd is not None:
-            model.actuator_biasprm[:, 2] = -self.kd
+        kp, kd = self.config.kp, self.config.kd
+        if kp is not None:  # position servo: force = kp (ctrl - q) - kv qdot
+            model.actuator_gainprm[:, 0] = kp
+            model.actuator_biasprm[:, 1] = -kp
+        if kd is not None:
+            model.actuator_biasprm[:, 2] = -kd
         return model
 
     def setup(self) -> None:
@@ -240,10 +221,10 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
         data = self.data
         mujoco.mju_quat2Mat(self._rot, data.qpos[3:7])
         rot = self._rot.reshape(3, 3)
-        raw[0:3] = data.qvel[3:6]  # the free joint's angular velocity is in the body frame
-        raw[3:6] = -rot[2]  # R^T (0, 0, -1)
-        raw[9:21] = data.qpos[7:] - DEFAULT_JOINT_POS
-        raw[21:33] = data.qvel[6:]
+        raw[_ANG_VEL] = data.qvel[3:6]  # the free joint's angular velocity is in the body frame
+        raw[_GRAVITY] = -rot[2]  # R^T (0, 0, -1)
+        raw[_JOINT_POS] = data.qpos[7:] - DEFAULT_JOINT_POS
+        raw[_JOINT_VEL] = data.qvel[6:]
         self.base_lin_vel = rot.T @ data.qvel[0:3]
 
     def _update_contacts(self) -> None:

@@ -1,17 +1,19 @@
 """The engine-independent half of Go1 velocity tracking: commands, observation, reward, end.
 
 :class:`Go1VelocityBase` holds everything the MuJoCo task (:mod:`.task`) and the Chrono task
-(:mod:`.chrono_task`) share, so both engines run the same interface, observation scales,
-reward terms, command sampling, pushes and termination, by the same code. An engine
-subclass reads and writes its simulation through a few hooks:
+(:mod:`.chrono_task`) share, so both engines run the same interface, settings
+(:class:`~.config.Go1TaskConfig`), observation scales, reward terms, command sampling, pushes
+and termination, by the same code. An engine subclass reads and writes its simulation through
+a few hooks:
 
 ===========================  =================================================================
 ``_reset_pose(yaw, joints)``  put the robot at rest at its home height, heading ``yaw``, with
                               these joint angles (``None``: the home pose) and servo targets
                               at the home pose; leave the state current
-``_read_state(raw)``          fill ``raw[0:6]`` (base angular velocity, projected gravity, body
-                              frame) and ``raw[9:33]`` (joint offsets, joint velocities); set
-                              ``self.base_lin_vel`` (body frame)
+``_read_state(raw)``          fill the ``base_ang_vel``, ``projected_gravity`` (body frame),
+                              ``joint_pos`` (offsets from the home pose) and ``joint_vel``
+                              groups of ``raw`` (``obs_group``); set ``self.base_lin_vel``
+                              (body frame)
 ``_set_joint_targets(q)``     the servo targets (rad, joint order FR, FL, RR, RL)
 ``_kick_base(dv)``            add ``dv`` (m/s, world x and y) to the base velocity
 ``_update_contacts()``        set ``self.feet_contact_now`` (4 bools) and ``self._base_contact``
@@ -21,13 +23,21 @@ subclass reads and writes its simulation through a few hooks:
 ``_set_friction(mu)``         foot-ground friction coefficient (domain randomization)
 ``_set_added_base_mass(dm)``  trunk mass = nominal + ``dm`` (domain randomization)
 ===========================  =================================================================
+
+Reward: each ``RewardWeights`` field names a method ``_reward_<field>(motion)`` that computes
+the term's unweighted value from the current state and changes nothing. ``reward()`` sums the
+weighted terms, and then, in one place, carries the step over to the next: the episode's sums
+(``_record_episode``), the feet's air time, contact memory and slip reference positions
+(``_update_feet_state``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
-from typing import Any
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -37,94 +47,106 @@ from chronogym.tasks.quadruped.config import (
     ACTION_DIM,
     OBS_DIM,
     OBS_SCALES,
-    CommandRanges,
-    DomainRandomization,
+    OBS_SLICES,
+    Go1TaskConfig,
     RewardWeights,
+    obs_group,
 )
 from chronogym.tasks.quadruped.model import DEFAULT_JOINT_POS
 
 #: Reward terms in the order of ``RewardWeights``' fields (the task's term vector).
 REWARD_TERMS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RewardWeights))
 _TRACKING_SIGMA = 0.25  # (m/s)^2 and (rad/s)^2 of the exponential tracking kernels
+_ANG_VEL = obs_group("base_ang_vel")
+_GRAVITY = obs_group("projected_gravity")
+_GRAVITY_Z = OBS_SLICES["projected_gravity"][0] + 2
+_COMMAND = obs_group("command")
+_JOINT_POS = obs_group("joint_pos")
+_LAST_ACTION = obs_group("last_action")
+#: ``None`` given for these keywords means the field's default (as for ``Go1TaskConfig()``).
+_NONE_IS_DEFAULT = ("commands", "rewards")
 
 
 def observation_scale() -> np.ndarray:
     """The (45,) vector the raw observation is multiplied by (``OBS_SCALES`` per group)."""
-    parts = []
-    for name, size in (
-        ("base_ang_vel", 3),
-        ("projected_gravity", 3),
-        ("command", 3),
-        ("joint_pos", 12),
-        ("joint_vel", 12),
-        ("last_action", 12),
-    ):
-        scale = OBS_SCALES[name]
-        parts.append(np.broadcast_to(np.asarray(scale, dtype=np.float64), (size,)))
-    return np.concatenate(parts)
+    scale = np.zeros(OBS_DIM)
+    for name, group in OBS_SLICES.items():
+        scale[slice(*group)] = OBS_SCALES[name]
+    return scale
 
 
-def _check_positive(name: str, value: Any) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"{name}={value!r}: expected a finite float > 0")
+def _task_config(
+    task: type, config: Go1TaskConfig | None, options: dict[str, Any]
+) -> Go1TaskConfig:
+    """``config`` (``None``: ``Go1TaskConfig()``) with the fields named in ``options``
+    replaced; a keyword that is no field is a TypeError naming it and what ``task`` takes."""
+    if config is None:
+        config = Go1TaskConfig()
+    elif not isinstance(config, Go1TaskConfig):
+        raise ValueError(f"config={config!r}: expected a Go1TaskConfig or None")
+    fields = [f.name for f in dataclasses.fields(Go1TaskConfig)]
+    unknown = [name for name in options if name not in fields]
+    if unknown:
+        own = [
+            p.name
+            for p in inspect.signature(task.__init__).parameters.values()
+            if p.kind is inspect.Parameter.KEYWORD_ONLY
+        ]
+        raise TypeError(
+            f"{task.__name__}() got an unexpected keyword argument {unknown[0]!r}: expected "
+            f"a Go1TaskConfig field ({', '.join(fields)}) or one of {', '.join(own)}"
+        )
+    changes = {
+        name: getattr(Go1TaskConfig(), name)
+        if value is None and name in _NONE_IS_DEFAULT
+        else value
+        for name, value in options.items()
+    }
+    return dataclasses.replace(config, **changes) if changes else config
+
+
+def _config_field(name: str) -> property:
+    """A read-only attribute that reads ``self.config.<name>``."""
+
+    def get(self: Go1VelocityBase) -> Any:
+        return getattr(self.config, name)
+
+    return property(get, doc=f"``config.{name}`` (read-only).")
+
+
+class BaseMotion(NamedTuple):
+    """The base's motion and the command at one decision, as floats (body frame)."""
+
+    lin_vel: list[float]  # (vx, vy, vz) m/s
+    ang_vel: list[float]  # (wx, wy, wz) rad/s
+    gravity: list[float]  # projected gravity (gx, gy, gz), unit vector
+    command: list[float]  # (vx, vy, yaw rate) commanded
+
+
+RewardTerm = Callable[["Go1VelocityBase", BaseMotion], float]
 
 
 class Go1VelocityBase(Task):
     """Go1 tracking a velocity command, for any engine: see the module docstring."""
 
-    def _init_tracking(
-        self,
-        *,
-        max_episode_steps: int | None,
-        commands: CommandRanges | None,
-        rewards: RewardWeights | None,
-        randomization: DomainRandomization | None,
-        action_scale: float,
-        action_clip: float,
-        max_tilt: float,
-        base_height_target: float,
-        air_time_threshold: float,
-        reset_joint_noise: float,
-        only_positive_rewards: bool,
-        kp: float | None,
-        kd: float | None,
-    ) -> None:
-        """Check and store the settings both engines share."""
-        for name, value in (
-            ("action_scale", action_scale),
-            ("action_clip", action_clip),
-            ("max_tilt", max_tilt),
-            ("base_height_target", base_height_target),
-        ):
-            _check_positive(name, value)
-        for name, value in (("kp", kp), ("kd", kd)):
-            if value is not None and not (
-                isinstance(value, (int, float)) and math.isfinite(value) and value >= 0
-            ):
-                raise ValueError(f"{name}={value!r}: expected None (the model's) or a float >= 0")
-        if not 0 <= air_time_threshold < 5:
-            raise ValueError(f"air_time_threshold={air_time_threshold!r}: expected in [0, 5) s")
-        if not 0 <= reset_joint_noise <= 0.5:
-            raise ValueError(f"reset_joint_noise={reset_joint_noise!r}: expected in [0, 0.5] rad")
-        self.max_episode_steps = max_episode_steps
-        self.commands = commands or CommandRanges()
-        self.weights = rewards or RewardWeights()
-        self.randomization = randomization
-        self.action_scale = float(action_scale)
-        self.action_clip = float(action_clip)
-        self.max_tilt = float(max_tilt)
-        self.base_height_target = float(base_height_target)
-        self.air_time_threshold = float(air_time_threshold)
-        self.reset_joint_noise = float(reset_joint_noise)
-        self.only_positive_rewards = bool(only_positive_rewards)
-        self.kp = kp
-        self.kd = kd
+    #: The settings shared by both engines (``Go1TaskConfig``).
+    config: Go1TaskConfig
+    weights = _config_field("rewards")
+    action_scale = _config_field("action_scale")
+    base_height_target = _config_field("base_height_target")
+
+    def _init_tracking(self, config: Go1TaskConfig | None, options: dict[str, Any]) -> None:
+        """Store the settings both engines share: ``config`` with ``options`` (keyword
+        arguments named as ``Go1TaskConfig`` fields) replacing its fields."""
+        self.config = _task_config(type(self), config, options)
+        self.max_episode_steps = self.config.max_episode_steps  # SimEnv writes the one in force
 
     def _setup_tracking(self) -> None:
         """Spaces and buffers; call once the simulation exists (in ``setup``)."""
+        config = self.config
         self.observation_space = spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
         self.action_space = spaces.Box(
-            -self.action_clip, self.action_clip, shape=(ACTION_DIM,), dtype=np.float32
+            -config.action_clip, config.action_clip, shape=(ACTION_DIM,), dtype=np.float32
         )
         self.control_dt = self.dt * self.k
         self._obs_scale = observation_scale()
@@ -136,14 +158,16 @@ class Go1VelocityBase(Task):
         self.feet_air_time = np.zeros(4)
         self.feet_contact = np.zeros(4, dtype=bool)
         self.feet_contact_now = np.zeros(4, dtype=bool)
-        weights = dataclasses.asdict(self.weights)
+        weights = dataclasses.asdict(config.rewards)
         self._term_weights = np.array([weights[n] for n in REWARD_TERMS]) * self.control_dt
         self._active_terms = [(i, n) for i, n in enumerate(REWARD_TERMS) if weights[n] != 0]
+        self._term_methods: list[tuple[int, RewardTerm]] = [
+            (i, getattr(type(self), f"_reward_{name}")) for i, name in self._active_terms
+        ]
         self._slip_on = weights["feet_slip"] != 0  # skip the foot-velocity work when off
         self._raw = np.zeros(len(REWARD_TERMS))
         self._weighted = np.zeros(len(REWARD_TERMS))
         self._episode_sum = np.zeros(len(REWARD_TERMS))
-        self._action_change = np.zeros(ACTION_DIM)
         self._steps = 0
         self._next_command: int | None = None
         self._next_push: int | None = None
@@ -192,7 +216,7 @@ class Go1VelocityBase(Task):
         options = options or {}
         self._apply_randomization(rng)
         yaw = rng.uniform(-math.pi, math.pi)
-        noise = self.reset_joint_noise
+        noise = self.config.reset_joint_noise
         joints = (
             DEFAULT_JOINT_POS + rng.uniform(-noise, noise, size=ACTION_DIM) if noise > 0 else None
         )
@@ -222,13 +246,13 @@ class Go1VelocityBase(Task):
                     f"options['command']={fixed!r}: expected 3 finite floats (vx, vy, yaw_rate)"
                 )
             return command.copy()
-        ranges = self.commands
+        ranges = self.config.commands
         return np.array(
             [rng.uniform(*ranges.vx), rng.uniform(*ranges.vy), rng.uniform(*ranges.yaw_rate)]
         )
 
     def _apply_randomization(self, rng: np.random.Generator) -> None:
-        dr = self.randomization
+        dr = self.config.randomization
         if dr is None:
             return
         if dr.friction is not None:
@@ -237,11 +261,11 @@ class Go1VelocityBase(Task):
             self._set_added_base_mass(rng.uniform(*dr.added_base_mass))
 
     def _resample_interval_steps(self) -> int | None:
-        seconds = self.commands.resample_s
+        seconds = self.config.commands.resample_s
         return None if seconds is None else max(1, round(seconds / self.control_dt))
 
     def _push_interval_steps(self) -> int | None:
-        dr = self.randomization
+        dr = self.config.randomization
         if dr is None or dr.push_interval_s is None:
             return None
         return max(1, round(dr.push_interval_s / self.control_dt))
@@ -251,11 +275,11 @@ class Go1VelocityBase(Task):
     def apply_action(self, action: np.ndarray) -> None:
         self.prev_action[:] = self.last_action
         self.last_action[:] = action
-        self._set_joint_targets(DEFAULT_JOINT_POS + self.action_scale * self.last_action)
+        self._set_joint_targets(DEFAULT_JOINT_POS + self.config.action_scale * self.last_action)
         self._steps += 1
         if self._next_push is not None and self._steps >= self._next_push:
-            kick = self._episode_rng.uniform(-1.0, 1.0, size=2) * self.randomization.push_velocity
-            self._kick_base(kick)
+            velocity = self.config.randomization.push_velocity
+            self._kick_base(self._episode_rng.uniform(-1.0, 1.0, size=2) * velocity)
             self._next_push += self._push_interval_steps()
         if self._next_command is not None and self._steps >= self._next_command:
             self.command = self._draw_command(self._episode_rng, None)
@@ -264,22 +288,42 @@ class Go1VelocityBase(Task):
     def observe(self) -> np.ndarray:
         raw = self._obs_raw
         self._read_state(raw)
-        raw[6:9] = self.command
-        raw[33:45] = self.last_action
+        raw[_COMMAND] = self.command
+        raw[_LAST_ACTION] = self.last_action
         return (raw * self._obs_scale).astype(np.float32)
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:
         self._update_contacts()
-        weighted = np.multiply(self._raw_terms(), self._term_weights, out=self._weighted)
+        motion = self._motion()
+        raw = self._raw_terms(motion, self._raw)
+        weighted = np.multiply(raw, self._term_weights, out=self._weighted)
+        total = float(weighted.sum())
+        if self.config.only_positive_rewards and total < 0:
+            total = 0.0  # a step never costs reward, so ending the episode early never pays
+        # after the reward, the only place where a step's reward state carries over:
+        self._record_episode(motion, weighted)
+        self._update_feet_state()
+        return total
+
+    def _record_episode(self, motion: BaseMotion, weighted: np.ndarray) -> None:
+        """Add the step to the episode's term sums and squared velocity-tracking errors."""
         self._episode_sum += weighted
-        vx, vy = self.base_lin_vel[0:2].tolist()
-        ex, ey = vx - self.command[0], vy - self.command[1]
+        vx, vy, _ = motion.lin_vel
+        cmd_x, cmd_y, _ = motion.command
+        ex, ey = vx - cmd_x, vy - cmd_y
         self._sq_err[0] += ex * ex
         self._sq_err[1] += ey * ey
-        total = float(weighted.sum())
-        if self.only_positive_rewards and total < 0:
-            total = 0.0  # a step never costs reward, so ending the episode early never pays
-        return total
+
+    def _update_feet_state(self) -> None:
+        """Carry the feet over to the next step: air time (0 on the ground), the contacts the
+        next touchdowns are found against, and the positions the next slip is measured from."""
+        contact = self.feet_contact_now
+        air = self.feet_air_time
+        air += self.control_dt
+        air[contact] = 0.0
+        self.feet_contact[:] = contact
+        if self._slip_on:
+            self._feet_xy_before = self._feet_xy()
 
     @property
     def reward_terms(self) -> dict[str, float]:
@@ -287,59 +331,100 @@ class Go1VelocityBase(Task):
         return {name: float(self._weighted[i]) for i, name in self._active_terms}
 
     def compute_reward_terms(self) -> dict[str, float]:
-        """Weighted, dt-scaled value of each active reward term for the current state."""
-        weighted = self._raw_terms() * self._term_weights
+        """Weighted, dt-scaled value of each active reward term for the current state (and
+        contacts as last updated); changes nothing."""
+        raw = self._raw_terms(self._motion(), np.zeros(len(REWARD_TERMS)))
+        weighted = raw * self._term_weights
         return {name: float(weighted[i]) for i, name in self._active_terms}
 
-    def _raw_terms(self) -> np.ndarray:
-        """Unweighted value of every term, in ``REWARD_TERMS`` order (one preallocated array)."""
-        vx, vy, vz = self.base_lin_vel.tolist()
-        wx, wy, wz, gx, gy = self._obs_raw[0:5].tolist()
-        cmd_x, cmd_y, cmd_wz = self.command.tolist()
-        np.subtract(self.last_action, self.prev_action, out=self._action_change)
-        posture = self._obs_raw[9:21]
-        torque = self._joint_torques()
-        height_error = self._base_height() - self.base_height_target
-        raw = self._raw
-        raw[0] = math.exp(-((vx - cmd_x) ** 2 + (vy - cmd_y) ** 2) / _TRACKING_SIGMA)
-        raw[1] = math.exp(-((wz - cmd_wz) ** 2) / _TRACKING_SIGMA)
-        raw[2] = vz * vz
-        raw[3] = wx * wx + wy * wy
-        raw[4] = gx * gx + gy * gy
-        raw[5] = height_error * height_error
-        raw[6] = self._action_change @ self._action_change
-        raw[7] = posture @ posture
-        raw[8] = torque @ torque
-        raw[9] = self._air_time_term(math.hypot(cmd_x, cmd_y) > 0.1)
-        raw[10] = self._slip_term() if self._slip_on else 0.0
-        return raw
+    def _motion(self) -> BaseMotion:
+        """The base's velocities, projected gravity and the command, as last observed."""
+        raw = self._obs_raw
+        return BaseMotion(
+            self.base_lin_vel.tolist(),
+            raw[_ANG_VEL].tolist(),
+            raw[_GRAVITY].tolist(),
+            self.command.tolist(),
+        )
 
-    def _slip_term(self) -> float:
+    def _raw_terms(self, motion: BaseMotion, out: np.ndarray) -> np.ndarray:
+        """Unweighted value of each active term, written into ``out`` at its ``REWARD_TERMS``
+        index (inactive terms are left as they are)."""
+        for index, term in self._term_methods:
+            out[index] = term(self, motion)
+        return out
+
+    # --- reward terms: one per RewardWeights field, unweighted, without side effects --------
+
+    def _reward_tracking_lin_vel(self, motion: BaseMotion) -> float:
+        """exp(-|v_xy - cmd_xy|^2 / sigma)."""
+        vx, vy, _ = motion.lin_vel
+        cmd_x, cmd_y, _ = motion.command
+        return math.exp(-((vx - cmd_x) ** 2 + (vy - cmd_y) ** 2) / _TRACKING_SIGMA)
+
+    def _reward_tracking_ang_vel(self, motion: BaseMotion) -> float:
+        """exp(-(w_z - cmd_wz)^2 / sigma)."""
+        return math.exp(-((motion.ang_vel[2] - motion.command[2]) ** 2) / _TRACKING_SIGMA)
+
+    def _reward_lin_vel_z(self, motion: BaseMotion) -> float:
+        """v_z^2."""
+        vz = motion.lin_vel[2]
+        return vz * vz
+
+    def _reward_ang_vel_xy(self, motion: BaseMotion) -> float:
+        """w_x^2 + w_y^2 (roll and pitch rate)."""
+        wx, wy, _ = motion.ang_vel
+        return wx * wx + wy * wy
+
+    def _reward_orientation(self, motion: BaseMotion) -> float:
+        """|projected gravity_xy|^2 (0 upright)."""
+        gx, gy, _ = motion.gravity
+        return gx * gx + gy * gy
+
+    def _reward_base_height(self, motion: BaseMotion) -> float:
+        """(h - target)^2."""
+        error = self._base_height() - self.config.base_height_target
+        return error * error
+
+    def _reward_action_rate(self, motion: BaseMotion) -> float:
+        """|a - a_prev|^2."""
+        change = self.last_action - self.prev_action
+        return change @ change
+
+    def _reward_joint_posture(self, motion: BaseMotion) -> float:
+        """|q - q_default|^2."""
+        offsets = self._obs_raw[_JOINT_POS]
+        return offsets @ offsets
+
+    def _reward_torques(self, motion: BaseMotion) -> float:
+        """|tau|^2."""
+        torque = self._joint_torques()
+        return torque @ torque
+
+    def _reward_feet_air_time(self, motion: BaseMotion) -> float:
+        """Sum over the feet touching down this step of (air time - threshold), while the
+        command asks to move (0 for a standing command)."""
+        cmd_x, cmd_y, _ = motion.command
+        if not math.hypot(cmd_x, cmd_y) > 0.1:
+            return 0.0
+        before = self.feet_contact.tolist()
+        value = 0.0
+        for foot, now in enumerate(self.feet_contact_now.tolist()):
+            if now and not before[foot]:  # touchdown: its swing lasted until this step's end
+                air = float(self.feet_air_time[foot]) + self.control_dt
+                value += air - self.config.air_time_threshold
+        return value
+
+    def _reward_feet_slip(self, motion: BaseMotion) -> float:
         """Sum over the feet on the ground of their squared horizontal speed, averaged over
         the last control interval (feet that slide instead of stepping)."""
-        feet = self._feet_xy()
-        moved = feet - self._feet_xy_before
-        self._feet_xy_before = feet
+        moved = self._feet_xy() - self._feet_xy_before
         speed2 = np.einsum("ij,ij->i", moved, moved) / (self.control_dt * self.control_dt)
         return float(speed2 @ self.feet_contact_now)
 
-    def _air_time_term(self, moving: bool) -> float:
-        contact = self.feet_contact_now
-        air = self.feet_air_time
-        air += self.control_dt
-        value = 0.0
-        before = self.feet_contact.tolist()
-        for foot, now in enumerate(contact.tolist()):
-            if now:
-                if not before[foot]:  # touchdown
-                    value += float(air[foot]) - self.air_time_threshold
-                air[foot] = 0.0
-        self.feet_contact = contact
-        return value if moving else 0.0
-
     def terminated(self, obs: np.ndarray) -> bool:
-        tilt = math.acos(min(1.0, max(-1.0, -self._obs_raw[5])))
-        self._fell = tilt > self.max_tilt or self._base_contact
+        tilt = math.acos(min(1.0, max(-1.0, -self._obs_raw[_GRAVITY_Z])))
+        self._fell = tilt > self.config.max_tilt or self._base_contact
         return self._fell
 
     def info(self) -> dict[str, Any]:
