@@ -26,6 +26,10 @@ class SpaceEnv(gym.Env):
         self.action_space = action_space
         self.t = 0
 
+    def action_value(self, action: Any) -> float:
+        """What the action adds to the reward (none here; subclasses may weigh it)."""
+        return 0.0
+
     def _sample(self) -> Any:
         self.observation_space.seed(int(self.np_random.integers(2**31)))
         return self.observation_space.sample()
@@ -39,7 +43,7 @@ class SpaceEnv(gym.Env):
         if not self.action_space.contains(action):
             raise ValueError(f"action {action!r} is not in {self.action_space}")
         self.t += 1
-        reward = float(self.np_random.random())
+        reward = self.action_value(action) + float(self.np_random.random())
         terminated = bool(self.np_random.random() < 0.25)
         truncated = self.t >= EPISODE_LENGTH
         return self._sample(), reward, terminated, truncated, {"t": self.t, "r": reward}

@@ -54,6 +54,7 @@ from gymnasium.vector import AutoresetMode
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
+from throughput_timing import start_ray as start_local_ray  # this script's folder
 
 import chronogym
 
@@ -424,25 +425,8 @@ def measure(
 
 
 def start_ray() -> None:
-    """One local Ray cluster for the whole run, its workers at chronogym's nice value (0), as
-    ``chronogym.ray_runtime.ensure_ray`` starts one; RayVectorEnv then reuses it."""
-    import ray
-
-    from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
-
-    extra = worker_niceness_env(WORKER_NICENESS)
-    os.environ.update(extra)  # read by the raylet that ray.init starts
-    try:
-        ray.init(
-            address="local",
-            num_cpus=os.cpu_count(),
-            include_dashboard=False,
-            log_to_driver=False,
-            logging_level="ERROR",
-        )
-    finally:
-        for key in extra:
-            os.environ.pop(key, None)
+    """One local Ray cluster for the whole run (``throughput_timing.start_ray``), settled."""
+    start_local_ray()
     time.sleep(RAY_SETTLE_S)
 
 

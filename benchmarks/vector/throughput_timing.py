@@ -187,14 +187,23 @@ def time_async_env(
 
 
 def start_ray() -> None:
-    """One local Ray cluster for the whole run (RayVectorEnv then reuses it)."""
+    """One local Ray cluster for the whole run, its workers at chronogym's nice value (0), as
+    ``chronogym.ray_runtime.ensure_ray`` starts one; RayVectorEnv then reuses it."""
     import ray
 
-    ray.init(
-        address="local",
-        num_cpus=os.cpu_count(),
-        include_dashboard=False,
-        log_to_driver=False,
-        logging_level="ERROR",
-    )
+    from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
+
+    extra = worker_niceness_env(WORKER_NICENESS)
+    os.environ.update(extra)  # read by the raylet that ray.init starts
+    try:
+        ray.init(
+            address="local",
+            num_cpus=os.cpu_count(),
+            include_dashboard=False,
+            log_to_driver=False,
+            logging_level="ERROR",
+        )
+    finally:
+        for key in extra:
+            os.environ.pop(key, None)
     time.sleep(RAY_SETTLE_S)

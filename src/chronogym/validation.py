@@ -74,6 +74,13 @@ def check_number(
     return float(value)
 
 
+def check_positive(name: str, value: Any, expected: str | None = None) -> float:
+    """``value`` as a float, if it is a finite number > 0; else a ValueError."""
+    if not is_number(value) or not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{name}={show(value)}: expected {expected or 'a finite number > 0'}")
+    return float(value)
+
+
 def check_bool(name: str, value: Any) -> bool:
     """``value`` if it is a bool; else a TypeError."""
     if not isinstance(value, (bool, np.bool_)):

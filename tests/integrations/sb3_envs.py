@@ -11,42 +11,20 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from space_envs import SpaceEnv
 
-EPISODE_LENGTH = 4
 
-
-class EchoEnv(gym.Env):
-    """Random observations of any space; the reward is a weighted sum of the flattened action.
-
-    Each action is checked against the action space, so a wrongly batched action fails;
-    episodes end at random (terminated) or after ``EPISODE_LENGTH`` steps (truncated).
-    """
+class EchoEnv(SpaceEnv):
+    """SpaceEnv whose reward also weighs the flattened action, so a wrongly batched action
+    changes the numbers (and fails the action-space check)."""
 
     def __init__(self, observation_space: spaces.Space, action_space: spaces.Space) -> None:
-        self.observation_space = observation_space
-        self.action_space = action_space
-        size = spaces.flatdim(action_space)
-        self._weights = np.arange(1.0, size + 1.0)
-        self.t = 0
+        super().__init__(observation_space, action_space)
+        self._weights = np.arange(1.0, spaces.flatdim(action_space) + 1.0)
 
-    def _sample(self) -> Any:
-        self.observation_space.seed(int(self.np_random.integers(2**31)))
-        return self.observation_space.sample()
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple:
-        super().reset(seed=seed)
-        self.t = 0
-        return self._sample(), {"t": self.t}
-
-    def step(self, action: Any) -> tuple:
-        if not self.action_space.contains(action):
-            raise ValueError(f"action {action!r} is not in {self.action_space}")
-        self.t += 1
+    def action_value(self, action: Any) -> float:
         flat = spaces.flatten(self.action_space, action).astype(np.float64)
-        reward = float(flat @ self._weights) + float(self.np_random.random())
-        terminated = bool(self.np_random.random() < 0.25)
-        truncated = self.t >= EPISODE_LENGTH
-        return self._sample(), reward, terminated, truncated, {"t": self.t, "r": reward}
+        return float(flat @ self._weights)
 
 
 class PlainEnv(gym.Env):

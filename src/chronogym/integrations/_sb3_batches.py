@@ -15,6 +15,8 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
 
+from chronogym.validation import show
+
 
 def batch_actions(space: spaces.Space, actions: Any, num_envs: int) -> Any:
     """SB3's ``actions`` for ``num_envs`` envs as a Gymnasium batch of ``space``.
@@ -34,15 +36,15 @@ def batch_actions(space: spaces.Space, actions: Any, num_envs: int) -> Any:
     if not composite:
         expected += f", or an array with {num_envs} rows"
     if isinstance(actions, (str, bytes, Mapping)) or not hasattr(actions, "__len__"):
-        raise ValueError(f"actions={_show(actions)}: {expected}")
+        raise ValueError(f"actions={show(actions)}: {expected}")
     if len(actions) != num_envs:
-        raise ValueError(f"actions={_show(actions)} holds {len(actions)} actions; {expected}")
+        raise ValueError(f"actions={show(actions)} holds {len(actions)} actions; {expected}")
     try:
         items = [actions[i] for i in range(num_envs)]
         out = create_empty_array(space, num_envs, fn=np.zeros)
         return concatenate(space, items, out)
     except Exception as error:
-        raise ValueError(f"actions={_show(actions)}: {error!r}; {expected}") from None
+        raise ValueError(f"actions={show(actions)}: {error!r}; {expected}") from None
 
 
 def sb3_obs(space: spaces.Space, obs: Any) -> Any:
@@ -76,8 +78,3 @@ def split_info(info: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:
 
 def _per_env(value: Any, num_envs: int) -> bool:
     return isinstance(value, np.ndarray) and value.ndim >= 1 and len(value) == num_envs
-
-
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 120 else text[:117] + "..."

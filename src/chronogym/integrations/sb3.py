@@ -50,6 +50,7 @@ from chronogym.integrations._indexed import (
     make_indexed_env,
 )
 from chronogym.integrations._sb3_batches import batch_actions, sb3_obs, split_info
+from chronogym.validation import check_int
 
 __all__ = [
     "BACKENDS",
@@ -460,8 +461,7 @@ def make_sb3_vec_env(
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend={backend!r}: expected one of {BACKENDS}")
-    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-        raise ValueError(f"num_envs={num_envs!r}: expected an integer >= 1")
+    check_int("num_envs", num_envs, low=1)
     mode = vector_kwargs.pop("autoreset_mode", SAME_STEP)
     if not _is_same_step(mode):
         raise ValueError(

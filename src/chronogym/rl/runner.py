@@ -27,6 +27,7 @@ from chronogym.rl.checkpoint import read_checkpoint
 from chronogym.rl.collection import Iteration, Rollouts, make_collection
 from chronogym.rl.config import PROGRESS_METRICS
 from chronogym.rl.progress import ProgressBar, ProgressLog
+from chronogym.validation import check_int, check_positive
 
 
 @dataclass(frozen=True)
@@ -59,17 +60,10 @@ class Budget:
         """The budget of ``train(iterations=..., minutes=...)``, checked: at least one given."""
         if iterations is None and minutes is None:
             raise ValueError("train: give iterations=..., minutes=..., or both")
-        if iterations is not None and (
-            isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1
-        ):
-            raise ValueError(f"iterations={iterations!r}: expected an integer >= 1")
-        if minutes is not None and (
-            isinstance(minutes, bool)
-            or not isinstance(minutes, (int, float))
-            or not math.isfinite(minutes)
-            or minutes <= 0
-        ):
-            raise ValueError(f"minutes={minutes!r}: expected a number > 0")
+        if iterations is not None:
+            check_int("iterations", iterations, low=1)
+        if minutes is not None:
+            check_positive("minutes", minutes, expected="a number > 0")
         return cls(iterations, minutes * 60.0 if minutes is not None else math.inf)
 
     def exhausted(self, done: int, elapsed: float) -> bool:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from chronogym.tasks.quadruped.model import HOME_BASE_HEIGHT
+from chronogym.validation import check_positive, is_number
 
 #: Scale of each observation group (observation = raw value x scale).
 OBS_SCALES: dict[str, float | tuple[float, float, float]] = {
@@ -69,14 +70,8 @@ class CommandRanges:
     def __post_init__(self) -> None:
         for name in ("vx", "vy", "yaw_rate"):
             _check_range(name, getattr(self, name))
-        value = self.resample_s
-        if value is not None and (
-            isinstance(value, bool)
-            or not isinstance(value, (int, float))
-            or not math.isfinite(value)
-            or value <= 0
-        ):
-            raise ValueError(f"resample_s={value!r}: expected None or seconds > 0")
+        if self.resample_s is not None:
+            check_positive("resample_s", self.resample_s, expected="None or seconds > 0")
 
 
 @dataclass(frozen=True)
@@ -145,11 +140,7 @@ class DomainRandomization:
 
 
 def _is_number(value: Any) -> bool:
-    return (
-        not isinstance(value, (bool, np.bool_))
-        and isinstance(value, (int, float, np.integer, np.floating))
-        and math.isfinite(value)
-    )
+    return is_number(value) and math.isfinite(value)
 
 
 def _check_type(name: str, value: Any, kind: type, optional: bool = False) -> None:
