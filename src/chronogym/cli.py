@@ -1,4 +1,8 @@
-"""The ``chronogym`` command line."""
+"""The ``chronogym`` command line: ``demo``, ``optimize``, ``train``, ``play`` and ``envs``.
+
+Its options are in :mod:`chronogym.cli_parser`; how it reports errors (a line for bad input,
+a traceback for a bug) is in :mod:`chronogym.cli_errors`.
+"""
 
 from __future__ import annotations
 
@@ -7,12 +11,15 @@ import hashlib
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
+from chronogym.cli_errors import UsageError, first_line, run_command
+from chronogym.cli_parser import build_parser
+
 DEMO_ENV = "chronogym/CartPole-v0"
-DEFAULT_STORAGE = "sqlite:///chronogym-optuna.db"
 BALANCE_GAINS = np.array([0.5, 10.0, 1.0, 1.5])  # on (x, angle, x velocity, angular velocity)
 
 
@@ -82,9 +89,6 @@ def compare_backends(args: argparse.Namespace, ticks: int, steps: int, progress:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Run the cart-pole on Ray workers and check the numbers against a serial run."""
-    for flag, value, least in (("ticks", args.ticks, 1), ("cheap-ticks", args.cheap_ticks, 0)):
-        if value < least:
-            raise SystemExit(f"--{flag}={value}: expected an integer >= {least}")
     print(
         f"chronogym demo: {args.num_envs} x {DEMO_ENV} on Ray, {args.ticks} physics ticks "
         f"per step ({args.steps} vector steps, seed {args.seed})"
@@ -128,16 +132,16 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     """Optimize the lander's absorbers with Optuna TPE, trials on parallel Ray workers."""
     import optuna
 
-    from chronogym.optim import open_storage, run_parallel_study
+    from chronogym.optim import run_parallel_study
     from chronogym.optim.lander import LanderObjective, describe_design, suggest_lander_design
 
-    for name in ("workers", "trials"):
-        if getattr(args, name) < 1:
-            raise SystemExit(f"--{name}={getattr(args, name)}: expected an integer >= 1")
-    try:  # engine checks (terrain of the engine, PyChrono installed) before Ray starts
-        objective = LanderObjective(terrain=args.terrain, seed=args.seed, engine=args.engine)
-    except (ValueError, ModuleNotFoundError) as exc:
-        raise SystemExit(f"chronogym optimize lander: {exc}") from None
+    if args.backend == "serial" and args.workers != 1:
+        raise UsageError(
+            f"--workers={args.workers} with --backend serial: the serial backend runs one trial "
+            "at a time; give --workers 1"
+        )
+    # engine checks (terrain of the engine, PyChrono installed) before the storage and Ray
+    objective = LanderObjective(terrain=args.terrain, seed=args.seed, engine=args.engine)
     engine_tag = "" if args.engine == "mujoco" else f"-{args.engine}"
     study_name = args.study or f"lander-{args.terrain}{engine_tag}"
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -147,18 +151,12 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         constant_liar=not args.no_constant_liar,
         n_startup_trials=args.startup_trials,
     )
-    study = optuna.create_study(
-        storage=open_storage(args.storage),
-        study_name=study_name,
-        direction="minimize",
-        sampler=sampler,
-        load_if_exists=True,
-    )
+    study = open_study(args.storage, study_name, sampler)
     # studies from before --engine hold MuJoCo trials; a new study takes this run's engine
     study_engine = study.user_attrs.get("engine", "mujoco" if study.trials else args.engine)
     if study_engine != args.engine:
-        raise SystemExit(
-            f"chronogym optimize lander: study {study_name!r} holds {study_engine} trials; "
+        raise UsageError(
+            f"study {study_name!r} holds {study_engine} trials; "
             f"--engine {args.engine} needs another --study"
         )
     study.set_user_attr("terrain", args.terrain)
@@ -209,33 +207,26 @@ def cmd_optimize(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """Train the Go1 velocity tracker with PPO (RSL-RL) on Ray workers or serially."""
-    from chronogym.rl.quadruped import train_quadruped
+    from chronogym.rl.quadruped import check_engine, train_quadruped
 
-    if args.num_envs < 1:
-        raise SystemExit(f"--num-envs={args.num_envs}: expected an integer >= 1")
     if args.iterations is None and args.minutes is None:
-        raise SystemExit("chronogym train: give --iterations I, --minutes M, or both")
-    if args.iterations is not None and args.iterations < 1:
-        raise SystemExit(f"--iterations={args.iterations}: expected an integer >= 1")
-    if args.minutes is not None and not args.minutes > 0:
-        raise SystemExit(f"--minutes={args.minutes}: expected a number > 0")
-    if args.torch_threads < 1:
-        raise SystemExit(f"--torch-threads={args.torch_threads}: expected an integer >= 1")
-    if args.update_threads is not None and args.update_threads < 1:
-        raise SystemExit(f"--update-threads={args.update_threads}: expected an integer >= 1")
+        raise UsageError("give --iterations I, --minutes M, or both")
     if args.update_threads is not None and args.policy_lag == 1:
-        raise SystemExit(
+        raise UsageError(
             f"--update-threads={args.update_threads} with --policy-lag 1: the overlapped update "
             "runs on --torch-threads; leave --update-threads out"
         )
     if args.policy_lag not in (0, 1):
-        raise SystemExit(
+        raise UsageError(
             f"--policy-lag={args.policy_lag}: expected 0 (synchronous PPO) or 1 (update "
             "overlapped with the next rollout)"
         )
-    if args.resume is not None and not os.path.isfile(args.resume):
-        raise SystemExit(f"--resume={args.resume}: no such checkpoint file")
-    _check_quadruped_engine("train", args)
+    if args.resume is not None and not os.path.exists(args.resume):
+        raise UsageError(f"--resume={args.resume}: no such checkpoint file")
+    check_engine(args.engine, args.terrain)
+    if args.resume is not None:
+        check_checkpoint(args.resume, "--resume")
+    check_out_folder(args.out)
     print(
         f"chronogym train quadruped: {args.num_envs} envs on the {args.backend} backend, "
         f"{args.terrain} terrain, {args.engine}, writing to {args.out}"
@@ -276,19 +267,19 @@ def cmd_train(args: argparse.Namespace) -> int:
 def cmd_play(args: argparse.Namespace) -> int:
     """Roll a trained policy out for a set of commands; print tracking errors, save a video."""
     from chronogym.rl.evaluate import format_summary
-    from chronogym.rl.quadruped import play_quadruped
+    from chronogym.rl.quadruped import check_can_render, check_engine, play_quadruped
 
-    if not os.path.isfile(args.checkpoint):
-        raise SystemExit(f"checkpoint {args.checkpoint!r}: no such file")
-    if args.episodes < 1:
-        raise SystemExit(f"--episodes={args.episodes}: expected an integer >= 1")
-    if args.steps is not None and args.steps < 1:
-        raise SystemExit(f"--steps={args.steps}: expected an integer >= 1")
-    if not args.video_seconds > 0:
-        raise SystemExit(f"--video-seconds={args.video_seconds}: expected a number > 0")
+    if not os.path.exists(args.checkpoint):
+        raise UsageError(f"checkpoint {args.checkpoint!r}: no such file")
     if args.video and os.path.splitext(args.video)[1].lower() not in (".mp4", ".gif", ".png"):
-        raise SystemExit(f"--video={args.video}: expected a .mp4, .gif or .png path")
-    _check_quadruped_engine("play", args)
+        raise UsageError(f"--video={args.video}: expected a .mp4, .gif or .png path")
+    check_engine(args.engine, args.terrain)
+    check_checkpoint(args.checkpoint, "checkpoint")
+    if args.video:
+        try:
+            check_can_render()
+        except RuntimeError as error:  # no GL library: a setup the user can change
+            raise UsageError(f"--video={args.video}: {first_line(error)}") from error
     commands = [tuple(c) for c in args.command] if args.command else None
     rows = play_quadruped(
         args.checkpoint,
@@ -307,153 +298,102 @@ def cmd_play(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_quadruped_engine(command: str, args: argparse.Namespace) -> None:
-    """Engine and terrain checks (Chrono: PyChrono installed) before anything starts."""
-    from chronogym.rl.quadruped import check_engine
+def open_study(url: str, study_name: str, sampler: Any) -> Any:
+    """The Optuna study ``study_name`` in the storage at ``url`` (created if new); a URL that
+    does not open (unknown scheme, missing driver, unreachable server) is a UsageError."""
+    import optuna
+    import sqlalchemy.exc
+
+    from chronogym.optim import open_storage
 
     try:
-        check_engine(args.engine, args.terrain)
-    except (ValueError, ModuleNotFoundError) as exc:
-        raise SystemExit(f"chronogym {command} quadruped: {exc}") from None
+        storage = open_storage(url)
+    except (ValueError, ImportError, OSError, sqlalchemy.exc.SQLAlchemyError) as error:
+        raise UsageError(
+            f"--storage={url}: cannot open this Optuna storage ({type(error).__name__}: "
+            f"{first_line(error)}); expected sqlite:///FILE.db, journal:FILE.log or an RDB URL"
+        ) from error
+    try:
+        return optuna.create_study(
+            storage=storage,
+            study_name=study_name,
+            direction="minimize",
+            sampler=sampler,
+            load_if_exists=True,
+        )
+    except sqlalchemy.exc.SQLAlchemyError as error:  # e.g. a database file that is read-only
+        raise UsageError(
+            f"--study={study_name}: cannot create or load it in {url} "
+            f"({type(error).__name__}: {first_line(error)})"
+        ) from error
+
+
+def check_checkpoint(path: str, name: str) -> None:
+    """Reject ``path`` (given as ``name``) unless it holds a checkpoint with an actor, before
+    any env or Ray worker starts (read with ``weights_only=True``: nothing is unpickled)."""
+    from chronogym.rl.checkpoint import read_checkpoint
+
+    saved = read_checkpoint(path, name)  # a ValueError naming the file when it is not one
+    if "actor_state_dict" not in saved:
+        keys = ", ".join(map(str, list(saved)[:8]))
+        raise UsageError(
+            f"{name}={path!r}: expected a checkpoint that `chronogym train` wrote; this dict "
+            f"has no 'actor_state_dict' (keys: {keys})"
+        )
+
+
+def check_out_folder(out: str) -> None:
+    """Create the output folder ``out`` now, so that a path that cannot be one fails before
+    any env starts."""
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as error:
+        raise UsageError(f"--out={out}: cannot create this folder ({error.strerror})") from error
 
 
 def cmd_envs(args: argparse.Namespace) -> int:
-    """List the registered chronogym environment ids."""
+    """List the registered chronogym environment ids; with an id, describe that environment."""
     import gymnasium as gym
 
     import chronogym  # noqa: F401  (registers the ids)
 
-    for env_id in sorted(i for i in gym.registry if i.startswith("chronogym/")):
-        print(env_id)
+    if args.env_id is None:
+        for env_id in sorted(i for i in gym.registry if i.startswith("chronogym/")):
+            print(env_id)
+        return 0
+    try:
+        spec = gym.spec(args.env_id)
+    except gym.error.Error as error:
+        raise UsageError(f"{args.env_id}: {error} (`chronogym envs` lists the ids)") from error
+    env = gym.make(spec)
+    try:
+        print(spec.id)
+        print(f"  observation space: {env.observation_space}")
+        print(f"  action space     : {env.action_space}")
+        print(f"  episode steps    : {spec.max_episode_steps or 'set by the task'}")
+    finally:
+        env.close()
     return 0
 
 
-QUADRUPED_ENGINES = ["mujoco", "chrono"]
-QUADRUPED_ENGINE_HELP = "physics engine (chrono: needs PyChrono; a MuJoCo checkpoint runs there)"
-QUADRUPED_TERRAINS = ["rigid", "soil", "scm"]
-QUADRUPED_TERRAIN_HELP = (
-    "rigid ground; soil: chronogym's SCM (engine mujoco); scm: Chrono's SCMTerrain (engine chrono)"
-)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    from chronogym.optim.lander import ENGINES as LANDER_ENGINES
-    from chronogym.optim.lander import TERRAINS as LANDER_TERRAINS
-
-    parser = argparse.ArgumentParser(
-        prog="chronogym",
-        description="High-fidelity simulations as Gymnasium environments, in parallel on Ray.",
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="run a short parallel cart-pole demo on Ray")
-    demo.add_argument("--num-envs", type=int, default=8)
-    demo.add_argument("--envs-per-worker", type=int, default=None)
-    demo.add_argument("--steps", type=int, default=1000)
-    demo.add_argument(
-        "--ticks", type=int, default=200, help="physics ticks per env step (20 ms of control)"
-    )
-    demo.add_argument(
-        "--cheap-ticks",
-        type=int,
-        default=10,
-        help="also time a cheap workload with this many ticks per step (0: skip)",
-    )
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--noise", type=float, default=1.5, help="policy noise std")
-    demo.add_argument("--address", default=None, help="Ray cluster address (default: local)")
-    demo.set_defaults(func=cmd_demo)
-    opt = sub.add_parser("optimize", help="parallel Bayesian optimization of a design")
-    opt.add_argument("problem", choices=["lander"])
-    opt.add_argument("--workers", type=int, default=2, help="trials evaluated in parallel")
-    opt.add_argument("--trials", type=int, default=40, help="finished trials wanted in the study")
-    opt.add_argument("--terrain", default="rigid", choices=list(LANDER_TERRAINS))
-    opt.add_argument("--storage", default=DEFAULT_STORAGE, help="Optuna storage URL")
-    opt.add_argument(
-        "--engine",
-        default="mujoco",
-        choices=list(LANDER_ENGINES),
-        help="physics engine (mujoco: rigid, rough, soil; chrono: rigid, scm; needs PyChrono)",
-    )
-    opt.add_argument(
-        "--study", default=None, help="study name (default lander-TERRAIN, +-chrono for Chrono)"
-    )
-    opt.add_argument("--seed", type=int, default=0)
-    opt.add_argument("--startup-trials", type=int, default=10, help="random trials before TPE")
-    opt.add_argument("--no-constant-liar", action="store_true")
-    opt.add_argument("--backend", default="ray", choices=["ray", "serial"])
-    opt.add_argument("--address", default=None, help="Ray cluster address (default: local)")
-    opt.set_defaults(func=cmd_optimize)
-    tr = sub.add_parser("train", help="train a policy with PPO (RSL-RL) on parallel envs")
-    tr.add_argument("problem", choices=["quadruped"])
-    tr.add_argument("--num-envs", type=int, default=32)
-    tr.add_argument("--backend", default="ray", choices=["ray", "serial"])
-    tr.add_argument("--iterations", type=int, default=None, help="PPO iterations to run")
-    tr.add_argument("--minutes", type=float, default=None, help="wall-clock budget")
-    tr.add_argument("--out", default="runs/quadruped", help="logs, CSV and checkpoints")
-    tr.add_argument("--resume", default=None, help="checkpoint to continue from")
-    tr.add_argument(
-        "--terrain", default="rigid", choices=QUADRUPED_TERRAINS, help=QUADRUPED_TERRAIN_HELP
-    )
-    tr.add_argument(
-        "--engine", default="mujoco", choices=QUADRUPED_ENGINES, help=QUADRUPED_ENGINE_HELP
-    )
-    tr.add_argument("--finetune", action="store_true", help="conservative PPO (paper's transfer)")
-    tr.add_argument("--seed", type=int, default=0)
-    tr.add_argument("--envs-per-worker", type=int, default=None)
-    tr.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (learner)")
-    tr.add_argument("--address", default=None, help="Ray cluster address (default: local)")
-    tr.add_argument(
-        "--policy-lag",
-        type=int,
-        default=0,
-        help="0 (default): synchronous PPO, the update on every core while the simulations "
-        "wait; 1: run each update while the next rollout is collected, one update stale",
-    )
-    tr.add_argument(
-        "--update-threads",
-        type=int,
-        default=None,
-        help="torch threads of the synchronous update (default: this machine's CPUs, at most 8)",
-    )
-    tr.set_defaults(func=cmd_train)
-    play = sub.add_parser("play", help="roll out a trained policy, print errors, save a video")
-    play.add_argument("problem", choices=["quadruped"])
-    play.add_argument("checkpoint")
-    play.add_argument(
-        "--video", default=None, help="MP4 to write (.gif: an animation, .png: a film strip)"
-    )
-    play.add_argument(
-        "--video-seconds", type=float, default=5.0, help="seconds recorded per command"
-    )
-    play.add_argument("--episodes", type=int, default=1, help="episodes per command")
-    play.add_argument(
-        "--command",
-        nargs=3,
-        type=float,
-        action="append",
-        metavar=("VX", "VY", "WZ"),
-        help="a command to evaluate (repeatable; default: a standard set)",
-    )
-    play.add_argument("--steps", type=int, default=None, help="episode length in steps")
-    play.add_argument(
-        "--terrain", default="rigid", choices=QUADRUPED_TERRAINS, help=QUADRUPED_TERRAIN_HELP
-    )
-    play.add_argument(
-        "--engine", default="mujoco", choices=QUADRUPED_ENGINES, help=QUADRUPED_ENGINE_HELP
-    )
-    play.add_argument("--seed", type=int, default=0)
-    play.set_defaults(func=cmd_play)
-    envs = sub.add_parser("envs", help="list registered environment ids")
-    envs.set_defaults(func=cmd_envs)
-    return parser
+#: Each subcommand: its function and the ``chronogym[...]`` extra that it needs.
+COMMANDS: dict[str, tuple[Callable[[argparse.Namespace], int], str | None]] = {
+    "demo": (cmd_demo, None),
+    "optimize": (cmd_optimize, "optim"),
+    "train": (cmd_train, "rl"),
+    "play": (cmd_play, "rl"),
+    "envs": (cmd_envs, None),
+}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``chronogym`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status.
+
+    A user error raises ``SystemExit`` with its message (:mod:`chronogym.cli_errors`)."""
     args = build_parser().parse_args(argv)
-    steps = getattr(args, "steps", None)
-    if steps is not None and steps < 1:
-        raise SystemExit(f"--steps={args.steps}: expected an integer >= 1")
-    return args.func(args)
+    command, extra = COMMANDS[args.subcommand]
+    prog = " ".join(["chronogym", args.subcommand, getattr(args, "problem", "")]).strip()
+    return run_command(command, args, prog, extra)
 
 
 if __name__ == "__main__":

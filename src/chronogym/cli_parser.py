@@ -1,0 +1,286 @@
+"""The ``chronogym`` command line's arguments: every option with a help text and its default.
+
+A value out of range (``--num-envs 0``) or a choice that does not exist (``chronogym train
+biped``) is rejected while parsing, in two lines on stderr (what was wrong, where the help is)
+and exit status 2, before anything heavy is imported or started.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any, NoReturn
+
+DEFAULT_STORAGE = "sqlite:///chronogym-optuna.db"
+QUADRUPED_ENGINES = ["mujoco", "chrono"]
+QUADRUPED_ENGINE_HELP = "physics engine (chrono: needs PyChrono; a MuJoCo checkpoint runs there)"
+QUADRUPED_TERRAINS = ["rigid", "soil", "scm"]
+QUADRUPED_TERRAIN_HELP = (
+    "rigid ground; soil: chronogym's SCM (engine mujoco); scm: Chrono's SCMTerrain (engine chrono)"
+)
+DEBUG_HELP = "show the traceback of an error, as CHRONOGYM_DEBUG=1 does (default: off)"
+ENVS_PER_WORKER_HELP = "envs stepped by one Ray worker (default: num-envs spread over the CPUs)"
+ADDRESS_HELP = "Ray cluster address (default: RAY_ADDRESS, else a new local cluster)"
+BACKEND_HELP = "ray: envs on Ray workers; serial: all in this process, no Ray"
+
+
+#: Each subcommand: its one-line summary in ``chronogym --help``, and its description.
+COMMAND_TEXTS = {
+    "demo": (
+        "run a short parallel cart-pole demo on Ray",
+        "Run the cart-pole on Ray workers and check its trajectories against a serial run.",
+    ),
+    "optimize": (
+        "parallel Bayesian optimization of a design",
+        "Optimize the lander's absorbers with Optuna TPE, trials on parallel Ray workers.",
+    ),
+    "train": (
+        "train a policy with PPO (RSL-RL) on parallel envs",
+        "Train the Go1 velocity tracker with PPO (RSL-RL) on Ray workers or serially.",
+    ),
+    "play": (
+        "roll out a trained policy, print errors, save a video",
+        "Roll a trained policy out for a set of commands; print tracking errors, save a video.",
+    ),
+    "envs": (
+        "list registered environment ids, or describe one",
+        "List the registered chronogym environment ids; with an id, describe that environment.",
+    ),
+}
+
+
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are two lines: the problem, then where help is."""
+
+    def error(self, message: str) -> NoReturn:
+        print(f"{self.prog}: {message}", file=sys.stderr)
+        print(f"(see '{self.prog} --help')", file=sys.stderr)
+        raise SystemExit(2)
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Appends ``(default: ...)`` to each option's help unless the help already names it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if "default" in text or not action.option_strings or action.default is argparse.SUPPRESS:
+            return text
+        if action.nargs == 0 and action.default is False:  # a flag
+            return f"{text} (default: off)"
+        return f"{text} (default: %(default)s)"
+
+
+class AtLeast(argparse.Action):
+    """Stores a number after checking it against ``least`` (>=) or ``above`` (>).
+
+    The error names the flag and the value as typed: ``--num-envs=0: expected an integer >= 1``.
+    """
+
+    def __init__(
+        self,
+        option_strings: list[str],
+        dest: str,
+        *,
+        least: float | None = None,
+        above: float | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if (least is None) == (above is None):
+            raise ValueError(f"AtLeast({dest!r}): give exactly one of least= and above=")
+        super().__init__(option_strings, dest, **kwargs)
+        self.least, self.above = least, above
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        value: Any,
+        option_string: str | None = None,
+    ) -> None:
+        kind = "an integer" if self.type is int else "a number"
+        if self.least is not None and not value >= self.least:
+            parser.error(f"{option_string}={value}: expected {kind} >= {self.least}")
+        if self.above is not None and not value > self.above:
+            parser.error(f"{option_string}={value}: expected {kind} > {self.above}")
+        setattr(namespace, self.dest, value)
+
+
+def installed_version() -> str:
+    """chronogym's version as installed (its package metadata)."""
+    try:
+        return version("chronogym")
+    except PackageNotFoundError:
+        return "unknown (not installed; run `pip install -e .`)"
+
+
+def add_command(sub: Any, name: str) -> Parser:
+    """The parser of subcommand ``name``: it shows defaults and takes ``--debug``."""
+    summary, description = COMMAND_TEXTS[name]
+    parser = sub.add_parser(
+        name, help=summary, description=description, formatter_class=HelpFormatter
+    )
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+    return parser
+
+
+def add_int(parser: Parser, flag: str, default: int | None, text: str, least: int = 1) -> None:
+    """An integer option that must be ``>= least``."""
+    parser.add_argument(flag, type=int, default=default, action=AtLeast, least=least, help=text)
+
+
+def add_ray_options(parser: Parser) -> None:
+    """Where the Ray workers run: ``--envs-per-worker`` and ``--address``."""
+    add_int(parser, "--envs-per-worker", None, ENVS_PER_WORKER_HELP)
+    parser.add_argument("--address", help=ADDRESS_HELP)
+
+
+def add_quadruped_world(parser: Parser) -> None:
+    """``--terrain`` and ``--engine`` of the Go1."""
+    parser.add_argument(
+        "--terrain", default="rigid", choices=QUADRUPED_TERRAINS, help=QUADRUPED_TERRAIN_HELP
+    )
+    parser.add_argument(
+        "--engine", default="mujoco", choices=QUADRUPED_ENGINES, help=QUADRUPED_ENGINE_HELP
+    )
+
+
+def add_demo(sub: Any) -> None:
+    demo = add_command(sub, "demo")
+    add_int(demo, "--num-envs", 8, "cart-poles stepped in parallel")
+    add_int(demo, "--steps", 1000, "vector steps to run")
+    add_int(demo, "--ticks", 200, "physics ticks per env step (20 ms of control)")
+    add_int(demo, "--cheap-ticks", 10, "also time a workload of this many ticks (0: skip)", least=0)
+    add_int(demo, "--seed", 0, "seed of the envs and the policy noise", least=0)
+    demo.add_argument(
+        "--noise", type=float, default=1.5, action=AtLeast, least=0, help="policy noise std"
+    )
+    add_ray_options(demo)
+
+
+def add_optimize(sub: Any) -> None:
+    from chronogym.optim.lander import ENGINES, TERRAINS
+
+    opt = add_command(sub, "optimize")
+    opt.add_argument("problem", choices=["lander"], help="the design problem")
+    add_int(opt, "--workers", 2, "trials run in parallel")
+    add_int(opt, "--trials", 40, "finished trials wanted in the study")
+    opt.add_argument("--terrain", default="rigid", choices=list(TERRAINS), help="landing ground")
+    opt.add_argument(
+        "--storage",
+        default=DEFAULT_STORAGE,
+        help="Optuna storage URL: sqlite:///FILE.db, journal:FILE.log or an RDB URL",
+    )
+    opt.add_argument(
+        "--engine",
+        default="mujoco",
+        choices=list(ENGINES),
+        help="physics engine (mujoco: rigid, rough, soil; chrono: rigid, scm; needs PyChrono)",
+    )
+    opt.add_argument("--study", help="study name (default: lander-TERRAIN, +-chrono for Chrono)")
+    add_int(opt, "--seed", 0, "seed of the TPE sampler", least=0)
+    add_int(opt, "--startup-trials", 10, "random trials before TPE", least=0)
+    opt.add_argument(
+        "--no-constant-liar",
+        action="store_true",
+        help="let parallel TPE suggestions ignore the trials still running",
+    )
+    opt.add_argument(
+        "--backend",
+        default="ray",
+        choices=["ray", "serial"],
+        help="ray: trials on Ray workers; serial: one trial at a time here (--workers 1)",
+    )
+    opt.add_argument("--address", help=ADDRESS_HELP)
+
+
+def add_train(sub: Any) -> None:
+    tr = add_command(sub, "train")
+    tr.add_argument("problem", choices=["quadruped"], help="the task to learn")
+    add_int(tr, "--num-envs", 32, "envs collecting data")
+    tr.add_argument("--backend", default="ray", choices=["ray", "serial"], help=BACKEND_HELP)
+    add_int(tr, "--iterations", None, "PPO iterations to run (default: until --minutes are spent)")
+    tr.add_argument(
+        "--minutes",
+        type=float,
+        action=AtLeast,
+        above=0,
+        help="wall-clock budget in minutes (default: until --iterations are done)",
+    )
+    tr.add_argument("--out", default="runs/quadruped", help="folder of logs, CSV and checkpoints")
+    tr.add_argument("--resume", help="checkpoint to continue from (default: a fresh policy)")
+    add_quadruped_world(tr)
+    tr.add_argument("--finetune", action="store_true", help="conservative PPO (paper's transfer)")
+    add_int(tr, "--seed", 0, "seed of the envs and the learner", least=0)
+    add_int(tr, "--torch-threads", 1, "torch CPU threads (learner)")
+    tr.add_argument(
+        "--policy-lag",
+        type=int,
+        default=0,
+        help="0 (default): synchronous PPO, the update on every core while the simulations "
+        "wait; 1: run each update while the next rollout is collected, one update stale",
+    )
+    add_int(
+        tr,
+        "--update-threads",
+        None,
+        "torch threads of the synchronous update (default: this machine's CPUs, at most 8)",
+    )
+    add_ray_options(tr)
+
+
+def add_play(sub: Any) -> None:
+    play = add_command(sub, "play")
+    play.add_argument("problem", choices=["quadruped"], help="the task the policy learned")
+    play.add_argument("checkpoint", help="a checkpoint that `chronogym train` wrote (.pt)")
+    play.add_argument(
+        "--video",
+        help="MP4 to write (.gif: an animation, .png: a film strip) (default: no video)",
+    )
+    play.add_argument(
+        "--video-seconds",
+        type=float,
+        default=5.0,
+        action=AtLeast,
+        above=0,
+        help="seconds recorded per command",
+    )
+    add_int(play, "--episodes", 1, "episodes per command")
+    play.add_argument(
+        "--command",
+        nargs=3,
+        type=float,
+        action="append",
+        metavar=("VX", "VY", "WZ"),
+        help="a command to evaluate (repeatable; default: a standard set)",
+    )
+    add_int(play, "--steps", None, "episode length in steps (default: the task's, 1000)")
+    add_quadruped_world(play)
+    add_int(play, "--seed", 0, "seed of the episodes", least=0)
+
+
+def add_envs(sub: Any) -> None:
+    envs = add_command(sub, "envs")
+    envs.add_argument(
+        "env_id", nargs="?", metavar="ID", help="an id to describe, e.g. chronogym/CartPole-v0"
+    )
+
+
+def build_parser() -> Parser:
+    """The parser of ``chronogym``; ``args.subcommand`` names the subcommand chosen."""
+    parser = Parser(
+        prog="chronogym",
+        description="High-fidelity simulations as Gymnasium environments, in parallel on Ray.",
+        formatter_class=HelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"chronogym {installed_version()}")
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+    sub = parser.add_subparsers(
+        dest="subcommand",
+        required=True,
+        metavar="COMMAND",
+        help="one of these (`chronogym COMMAND --help` shows its options):",
+    )
+    for add in (add_demo, add_optimize, add_train, add_play, add_envs):
+        add(sub)
+    return parser
