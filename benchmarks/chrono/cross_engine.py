@@ -9,7 +9,7 @@ contact, ``ChronoSettings``); the table prints ``a_max``, ``E_abs``, the largest
 landing. ``--convergence`` also lands the default design in Chrono at 0.5, 0.25 and 0.125 ms.
 
 What differs between the engines, and why the numbers do (the committed run: the default
-design within 2 % on a_max, E_abs, stroke and J; see benchmarks/README.md):
+design within 2 % on a_max, E_abs, stroke and J; see docs/performance/chrono.md):
 
 * **Knee loops.**  Chrono enforces every joint exactly (direct sparse LU); MuJoCo closes the
   six knee loops with soft ``connect`` equalities (4 ms time constant), which take work:
@@ -40,7 +40,9 @@ design within 2 % on a_max, E_abs, stroke and J; see benchmarks/README.md):
 * **Cost.**  A Chrono landing is 5-18x dearer: ~1 ms per 0.25 ms step (the sparse LU
   about 0.7 ms, the Python side of the tick 0.3 ms) against MuJoCo's ~0.1 ms per 0.5 ms.
 
-    python benchmarks/chrono/cross_engine.py [--convergence] [--out benchmarks/results/cross_engine.json]
+    python benchmarks/chrono/cross_engine.py [--convergence] [--out JSON]
+
+The JSON goes to ``benchmarks/results/cross_engine.json`` unless ``--out`` names another file.
 
 Needs PyChrono (``conda install projectchrono::pychrono -c conda-forge``); without it the
 script says so and exits with status 1.
@@ -194,7 +196,7 @@ def main() -> None:
     plotted = plot(histories, png)
     result = {
         **header("cross_engine", "pychrono"),
-        # also at the top, as earlier records had them
+        # also top-level keys, as in the committed JSON
         "python": platform.python_version(),
         **versions("mujoco", "pychrono", "numpy"),
         "params": dataclasses.asdict(params),

@@ -13,7 +13,7 @@ is the worst of the final best values of all constant-liar runs, so every run re
     python benchmarks/lander/bo_scaling.py                  # W in {1, 2, 4, 8}, 2 seeds, rigid
     python benchmarks/lander/bo_scaling.py --quick          # smoke run
     python benchmarks/lander/bo_scaling.py --terrain rigid rough --seeds 3 --address auto
-    python benchmarks/lander/bo_scaling.py --terrain soil   # SCM soil: ~2 s a landing (rigid ~0.3 s)
+    python benchmarks/lander/bo_scaling.py --terrain soil   # SCM soil: ~2 s a landing (rigid 0.3)
     python benchmarks/lander/bo_scaling.py --engine chrono --terrain scm --workers 1 2 --seeds 1 \
         --trials 16 --skip-liar-check --out-dir benchmarks/results/bo_scaling_chrono_scm
         # Chrono's SCMTerrain (needs PyChrono with its vehicle module): ~16 s a landing

@@ -241,7 +241,7 @@ def main() -> None:
         print(table(POLICY_COLUMNS, played, sep=" "))
     result = {
         **header("quadruped_physics"),
-        **versions("mujoco"),  # also at the top, as earlier records had it
+        **versions("mujoco"),  # also a top-level key, as in the committed JSON
         "control_dt": CONTROL_DT,
         "policy_steps": STEPS,
         "rows": [asdict(row) for row in rows],

@@ -15,11 +15,11 @@ and ``time_to_walk.png`` (commands passed and worst MSE against wall clock, one 
 
 A configuration is as in ``train_throughput.py``
 (``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``);
-``serial:32:0:48:5:1`` is the README's former training command (serial, synchronous, 5 ms
-physics, a 1-thread update), ``ray:32:0:48`` the new default of ``chronogym train quadruped``.
+``serial:32:0:48:5:1`` is serial, synchronous PPO at 5 ms physics with a 1-thread update;
+``ray:32:0:48`` is the default of ``chronogym train quadruped``.
 ``--keep`` keeps the runs (configuration and seed) already in ``--out`` that this invocation
-does not run; a configuration's settings then list every seed it has, and its earlier machine
-record stays in ``earlier_machines``.
+does not run; a configuration's settings then list every seed it has, and the machine record
+(with its date) of the invocation that ran a kept configuration stays in ``earlier_machines``.
 """
 
 from __future__ import annotations
@@ -142,7 +142,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--max-mse", type=float, default=0.01, help="(m/s)², x and y")
     parser.add_argument("--evaluate-only", action="store_true")
     parser.add_argument(
-        "--keep", action="store_true", help="keep earlier runs (config and seed) not run now"
+        "--keep",
+        action="store_true",
+        help="keep the runs (config and seed) already in --out that this invocation does not run",
     )
     parser.add_argument("--runs", type=Path, default=RUNS)
     parser.add_argument("--out", type=Path, default=OUT)
@@ -216,7 +218,7 @@ def ppo_settings() -> dict[str, Any]:
 
 
 def merged_settings(args: argparse.Namespace, earlier: dict[str, Any] | None) -> dict[str, Any]:
-    """This invocation's settings of a configuration, with the seeds of its earlier kept runs."""
+    """This invocation's settings of a configuration, with the seeds of its kept runs."""
     current = {**settings(args), "ppo": ppo_settings()}
     if earlier:
         current["seeds"] = sorted(set(earlier.get("seeds", [])) | set(args.seeds))

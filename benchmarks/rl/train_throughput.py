@@ -14,7 +14,7 @@ A configuration is
 ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``
 (steps per env per iteration default to the Go1 settings, 48; the physics step to the task's,
 10 ms; a synchronous update's threads to ``train_quadruped``'s, every CPU). ``serial:32:0:48:5:1``
-is the former training command: serial, synchronous, 5 ms physics, a 1-thread update.
+is serial, synchronous PPO at 5 ms physics with a 1-thread update.
 """
 
 from __future__ import annotations

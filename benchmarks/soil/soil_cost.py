@@ -1,8 +1,8 @@
 """Cost of SCM soil (``chronogym.terrain.MujocoSoil``) against rigid ground for the Go1.
 
 The same seeded smooth random joint targets as ``quadruped_physics.py`` (walking-like contact
-changes) drive the Go1 at the task's physics settings (elliptic cone, impratio 100, dt 5 ms,
-4 physics steps per 20 ms policy step) for the same number of physics steps on:
+changes) drive the Go1 at the task's contact settings (elliptic cone, impratio 100) with 5 ms
+physics steps, 4 per 20 ms policy step, for the same number of physics steps on:
 
 * ``rigid``: the floor plane, ``mj_step(model, data, 4)`` per policy step;
 * ``<preset>/feet``: soil under the four foot spheres; the floor keeps touching the rest;
@@ -18,9 +18,9 @@ the numba kernel (or loads it from the cache); it is timed apart (``first_advanc
 counted in the rows.
 
 A second table times the Go1 task itself (``SimEnv.step``: observation, reward, the soil window
-following the trunk) at each terrain's default physics step, rigid 5 ms x 4 against soil
-2 ms x 10 (the soil's explicit force law needs the smaller step, ``PHYSICS_STEP``): the cost
-of a soil episode against a rigid one, as training pays it.
+following the trunk) at each terrain's default physics step (``PHYSICS_STEP``: rigid 10 ms x 2,
+soil 2 ms x 10, the smaller step that the soil's explicit force law needs): the cost of a soil
+episode against a rigid one, as training pays it.
 
     python benchmarks/soil/soil_cost.py [--out benchmarks/results/soil_cost.json]
 """
@@ -147,8 +147,8 @@ def run(model, data, soil, targets: np.ndarray) -> tuple[float, dict]:
 
 
 def task_episodes(targets: np.ndarray, repeats: int) -> list[dict]:
-    """The Go1 task as training runs it (``SimEnv.step``, the task's defaults per terrain:
-    rigid 5 ms x 4, soil 2 ms x 10 with the window following the trunk), the same targets."""
+    """The Go1 task as training runs it (``SimEnv.step``, the task's physics step per terrain,
+    ``PHYSICS_STEP``; on soil the window follows the trunk), the same targets."""
     from chronogym.env import SimEnv
     from chronogym.tasks.quadruped import DEFAULT_JOINT_POS, Go1VelocityTask
 
@@ -209,7 +209,7 @@ def main() -> None:
     print(table(EPISODE_COLUMNS, [{**r, "dt_ms": r["dt"] * 1e3} for r in episodes], sep=" "))
     result = {
         **header("soil_cost", "numba"),
-        **versions("mujoco", "numpy", "numba"),  # also at the top, as earlier records had them
+        **versions("mujoco", "numpy", "numba"),  # also top-level keys, as in the committed JSON
         "first_advance_s": first_advance_s,
         "dt": DT,
         "substeps": SUBSTEPS,

@@ -150,7 +150,7 @@ def main() -> None:
     print(f"RAY_AUTH_MODE={auth_mode!r}; dashboard on :{DASHBOARD_PORT}: {dashboard_up}")
     result = {
         **header("ray_ports"),
-        **versions("ray"),  # also at the top, as earlier records had it
+        **versions("ray"),  # also a top-level key, as in the committed JSON
         "auth_mode": auth_mode,
         "dashboard_listening": dashboard_up,
         "dashboard_url": dashboard_url,

@@ -8,14 +8,14 @@ Prints an aligned table and writes JSON (default ``benchmarks/results/throughput
     python benchmarks/vector/throughput.py            # default sweep, < 4 min on 2 cores
     python benchmarks/vector/throughput.py --quick    # smoke run, < 1 min
     python benchmarks/vector/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
-    python benchmarks/vector/throughput.py --transports actor socket   # several RayVectorEnv transports
+    python benchmarks/vector/throughput.py --transports actor socket   # RayVectorEnv transports
     python benchmarks/vector/throughput.py --breakdown   # one vector step split into phases (µs)
-    python benchmarks/vector/throughput.py --background-load   # Ray worker priority beside a busy process
+    python benchmarks/vector/throughput.py --background-load   # worker priority beside a busy job
 
 Counting: the cart-pole runs with ``terminate=False`` (the pole may fall; episodes end
 only by truncation after 500 steps), so every env step costs the same physics and no
 worker waits for another because its envs happened to reset (with falling episodes,
-up to half of all steps were physics-free autoresets at large ``k``, spread unevenly
+up to half of all steps are physics-free autoresets at large ``k``, spread unevenly
 over the workers). ``steps/s`` counts env steps as Gymnasium does, including the
 autoreset steps of NEXT_STEP mode; ``sim-steps/s`` counts only the env steps that ran
 physics; the AsyncVectorEnv ratio and the parallel efficiency use it, so they compare
@@ -34,8 +34,7 @@ actions at once, against the barrier ``step`` of the same transport's rows. Thei
 ``µs/vstep`` is per ``recv``, which returns about N/2 envs.
 
 The transports are ``socket`` (rows ``ray-sock``, RayVectorEnv's default) and ``actor``
-(``ray``); the ``compiled`` transport (Ray Compiled Graphs, ``ray-cg``) was removed from
-chronogym.
+(``ray``).
 
 ``--background-load`` replaces the sweep by 16 Go1 envs with Ray workers at nice 0
 (chronogym's default) and at Ray's nice 15, and serially, quiet and beside one busy process

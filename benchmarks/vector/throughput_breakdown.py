@@ -71,7 +71,7 @@ class Breakdown:
 
     @property
     def budget_us(self) -> float:
-        """The issue's driver-overhead budget: 100 µs + 5 µs per env."""
+        """The driver-overhead budget: 100 µs + 5 µs per env."""
         return 100.0 + 5.0 * self.num_envs
 
 
@@ -210,7 +210,7 @@ Workers (measured inside, slowest worker of each step): w-comp = time in the env
 w-serde = actions from bytes, results to bytes. call+xfer = wait - w-comp - w-serde: Ray's call
 and transfer, and waiting for a core. driver = prep + submit + get + join (the driver's own work).
 serial: everything runs inside submit (no Ray). µs/vstep: an unprofiled run.
-overhead = profiled µs/vstep - w-comp; budget = 100 µs + 5 µs x N (the issue's goal); drv / ovh:
+overhead = profiled µs/vstep - w-comp; budget = 100 µs + 5 µs x N (the goal); drv / ovh:
 driver / overhead within budget. cpu-idle, cpu-busy: % of one core used by the workers (summed) /
 the driver while nothing steps / while stepping (a polling transport shows up in cpu-idle).
 balance = mean worker's w-comp / slowest worker's (the barrier waits for the slowest); eff =

@@ -2,9 +2,9 @@
 
 Not a script. :func:`derive` adds to every result its ratio to AsyncVectorEnv at the same N
 and cost (``x_async``) and its parallel efficiency against the raw single-env loop; then the
-sweep's table and notes, the goal table per transport (the issue "Scale-out that holds up":
-``x_async`` >= 1.0 everywhere and >= 1.5 on the cheapest cost, ``eff`` >= 0.9 where one call
-carries >= 1 ms of physics) and the JSON record.
+sweep's table and notes, the goal table per transport (the scale-out goals: ``x_async`` >= 1.0
+everywhere and >= 1.5 on the cheapest cost, ``eff`` >= 0.9 where one call carries >= 1 ms of
+physics) and the JSON record.
 """
 
 from __future__ import annotations
