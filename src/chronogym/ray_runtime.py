@@ -33,7 +33,8 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
     except OSError as error:
         raise ConnectionError(
             f"Ray address {address!r} is unreachable ({error}); expected a running Ray head "
-            "(start one with `ray start --head`), or pass address=None for a local cluster"
+            "(start one with `ray start --head`), or leave the address out (None) for a local "
+            "cluster"
         ) from None
 
 

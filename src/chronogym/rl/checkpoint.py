@@ -26,7 +26,9 @@ def read_checkpoint(path: str | Path, name: str) -> dict[str, Any]:
             f"data ({type(error).__name__}: {first_line})"
         ) from error
     if not isinstance(saved, dict):
-        raise ValueError(f"{name}={str(path)!r}: expected a checkpoint dict, got {type(saved)}")
+        raise ValueError(
+            f"{name}={str(path)!r}: expected a checkpoint dict, got {type(saved).__name__}"
+        )
     return saved
 
 
@@ -59,6 +61,11 @@ def load_policy(
     saved = read_checkpoint(checkpoint, "checkpoint")  # no unpickling
     infos = saved.get("infos") or {}
     cfg = train_cfg or infos.get("train_cfg") or ppo_train_config()
+    if "actor_state_dict" not in saved:
+        raise ValueError(
+            f"checkpoint={str(checkpoint)!r}: expected a checkpoint with 'actor_state_dict' "
+            f"(keys: {sorted(map(str, saved))[:8]})"
+        )
     state = saved["actor_state_dict"]
     stored_obs, stored_act = infos.get("observation_dim"), infos.get("num_actions")
     for name, given, stored in (

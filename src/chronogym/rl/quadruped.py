@@ -26,7 +26,7 @@ ENGINE_TERRAINS: dict[str, tuple[str, ...]] = {"mujoco": TERRAINS, "chrono": ("r
 #: noisy: the default 32 envs x 48 steps keep the batch at ~1.5k samples, a smaller initial
 #: action noise keeps the servos from shaking the robot, and a fixed learning rate replaces the
 #: adaptive schedule, which drove the rate to its 1e-5 floor within the first iteration
-#: (``benchmarks/README.md``, "Go1 training"). With ``policy_lag=1`` lower the entropy bonus
+#: (``docs/performance/rl.md``, "Go1 training"). With ``policy_lag=1`` lower the entropy bonus
 #: (0.001 and a learning rate of 2e-4 walked sooner there; "Go1 training with the overlapped
 #: update").
 QUADRUPED_PPO: dict[str, Any] = {

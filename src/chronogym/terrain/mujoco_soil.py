@@ -4,7 +4,7 @@ Use it before ``mj_step`` in a task's advanceables::
 
     calves = ["FR_calf", "FL_calf", "RR_calf", "RL_calf"]   # calf capsule + foot sphere each
     soil = MujocoSoil(model, data, "soft", bodies=calves, extent=(8, 8), resolution=0.01)
-    soil.exclude_ground("floor")      # the rigid floor no longer touches the soil's geoms
+    soil.exclude_ground("floor")      # the rigid floor does not touch the soil's geoms
     task.advanceables = [soil, (model, data)]
 
 Order of one tick (``Advance(dt)``), for the state ``mj_step`` is about to integrate:

@@ -83,7 +83,7 @@ class RayVectorEnv(WorkerVectorEnv):
             temporary directory and each step's bytes (``step``, ``send`` /
             ``recv``) go over it, several times cheaper than a Ray call;
             workers on other nodes use plain calls. ``"actor"``: one plain Ray
-            actor call per worker. See ``benchmarks/README.md``. Box spaces
+            actor call per worker. See ``docs/performance/vector.md``. Box spaces
             only; other calls (reset, ``call``, other spaces) always use plain
             actor calls, and faults are handled the same way with both
             transports.

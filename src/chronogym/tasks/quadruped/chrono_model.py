@@ -79,7 +79,7 @@ class ChronoGo1Settings:
         contact: ``"nsc"`` (complementarity) or ``"smc"`` (penalty).
         friction: Coulomb friction of feet and ground (``None``: the MJCF's, 1.0).
         solver_iterations: iterations of the NSC solver (Barzilai-Borwein); 40 gave the same
-            gaits as 100 (to 0.01 m/s) at 0.58x the cost (``benchmarks/README.md``).
+            gaits as 100 (to 0.01 m/s) at 0.58x the cost (``docs/performance/chrono.md``).
         contact_stiffness: SMC normal stiffness per contact [N/m]: a standing foot
             (31 N) sinks 31 / k.
         contact_damping: SMC normal damping coefficient ``g_n`` [1/s] (Chrono scales it by

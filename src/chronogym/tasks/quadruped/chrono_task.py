@@ -59,7 +59,7 @@ CHRONO_TERRAINS: tuple[str, ...] = ("rigid", "scm")
 #: Default (dt, k) per contact method on rigid ground, 50 Hz policy.
 CHRONO_PHYSICS_STEP: dict[str, tuple[float, int]] = {"nsc": (0.002, 10), "smc": (0.0005, 40)}
 #: Default (dt, k) on SCM (its soil forces are explicit). A rigid-trained policy at 0.5 m/s on
-#: "firm" (5 s, seed 0): mean vx 0.45 / 0.49 / 0.50 at 2 / 1 / 0.5 ms (benchmarks/README.md).
+#: "firm" (5 s, seed 0): mean vx 0.45 / 0.49 / 0.50 at 2 / 1 / 0.5 ms (docs/performance/chrono.md).
 CHRONO_SCM_STEP: tuple[float, int] = (0.001, 20)
 #: SCM active domains: (centre, full size) of a box around each foot (calf frame) and one
 #: around the trunk (trunk frame, hips and thighs inside) [m].

@@ -10,7 +10,7 @@ Action (float32, 12): normalized joint targets; target = default pose + ``action
 sent to the model's position servos, torque-limited, with the task's gains ``kp`` = 35 N m/rad
 and ``kd`` = 0.5 N m s/rad (``None`` keeps the model's kp 100, kv 2). With the stiff servos the
 50 Hz exploration noise shakes the robot forward like a bristlebot: the stochastic policy tracked
-the command in training while its mean stood still (benchmarks/README.md, "Go1 training").
+the command in training while its mean stood still (docs/performance/rl.md, "Go1 training").
 Reward: named, weighted terms (``RewardWeights``) times the control interval, clipped at 0
 from below (``only_positive_rewards``, as in legged_gym: with random actions the penalties
 outweigh tracking, and PPO would learn to fall on purpose); the terms of

@@ -297,7 +297,7 @@ class LanderSim(Landing):
 
     def _make_soil(self) -> MujocoSoil | None:
         """The terrain's SCM soil on this model (``None`` on rigid ground), holding the pads
-        and the chassis; the ground plane no longer touches them."""
+        and the chassis; the ground plane does not touch them."""
         terrain = self.terrain
         if terrain.soil is None:
             return None
