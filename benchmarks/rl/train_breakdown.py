@@ -18,8 +18,10 @@ Prints a table (ms per iteration, medians over the iterations after ``--warmup``
 
     python benchmarks/rl/train_breakdown.py                       # ray:32:0 and serial:32:0
     python benchmarks/rl/train_breakdown.py --configs ray:16:0 ray:64:0:24 --iterations 20
+    python benchmarks/rl/train_breakdown.py --configs ray:32:0 ray:32:0+dw serial:32:0
 
-Configurations are ``train_throughput.py``'s, synchronous only (policy lag 0).
+Configurations are ``train_throughput.py``'s, synchronous only (policy lag 0); a ``+dw`` suffix
+on a Ray configuration sets ``RayVectorEnv(driver_worker=True)``.
 """
 
 from __future__ import annotations
@@ -40,6 +42,18 @@ from common import RESULTS, Column, header, settings, table, write_json
 from train_throughput import TrainConfig, parse_config
 
 DEFAULT_CONFIGS = ("ray:32:0", "serial:32:0")
+DRIVER_WORKER = "+dw"  # config suffix: the driver steps one worker's envs (Ray only)
+
+
+def parse(text: str) -> tuple[TrainConfig, bool]:
+    """A configuration and whether it asks for ``driver_worker=True``."""
+    driver_worker = text.endswith(DRIVER_WORKER)
+    config = parse_config(text.removesuffix(DRIVER_WORKER))
+    if driver_worker and config.backend != "ray":
+        raise argparse.ArgumentTypeError(f"config {text!r}: {DRIVER_WORKER} needs the Ray backend")
+    return config, driver_worker
+
+
 OUT = RESULTS / "train_breakdown.json"
 PHASES = ("act", "vec_step", "compute", "transport", "adapter", "storage", "update", "other")
 
@@ -61,7 +75,9 @@ class TimedVecEnv:
         return out
 
 
-def measure(config: TrainConfig, iterations: int, warmup: int) -> list[dict[str, float]]:
+def measure(
+    config: TrainConfig, iterations: int, warmup: int, driver_worker: bool = False
+) -> list[dict[str, float]]:
     """Run ``iterations`` timed PPO iterations of ``config``; seconds per phase, per iteration."""
     import torch
     from rsl_rl.runners import OnPolicyRunner
@@ -73,7 +89,10 @@ def measure(config: TrainConfig, iterations: int, warmup: int) -> list[dict[str,
     )
     from chronogym.rl.vecenv import RslRlVecEnv
 
-    vec = make_quadruped_vec_env(config.num_envs, config.backend, task_kwargs=config.task_kwargs())
+    extra = {"driver_worker": True} if driver_worker else {}
+    vec = make_quadruped_vec_env(
+        config.num_envs, config.backend, task_kwargs=config.task_kwargs(), **extra
+    )
     timed = TimedVecEnv(vec)
     env = RslRlVecEnv(timed, seed=0)
     cfg = quadruped_train_config(**({"num_steps_per_env": config.steps} if config.steps else {}))
@@ -142,7 +161,7 @@ def run_config(text: str, iterations: int, warmup: int) -> dict[str, Any]:
     if done.returncode != 0:
         raise RuntimeError(f"{text} failed:\n{done.stderr[-3000:]}")
     rows = json.loads(done.stdout.strip().splitlines()[-1])
-    config = parse_config(text)
+    config, _ = parse(text)
     samples = (config.steps or 48) * config.num_envs
     summary: dict[str, Any] = {"config": text}
     for key in ("iteration", *PHASES):
@@ -166,11 +185,12 @@ def main(argv: list[str] | None = None) -> None:
     if args.iterations < args.warmup + 1:
         parser.error(f"--iterations={args.iterations}: expected >= --warmup + 1")
     if args.one is not None:
-        print(json.dumps(measure(parse_config(args.one), args.iterations, args.warmup)))
+        config, driver_worker = parse(args.one)
+        print(json.dumps(measure(config, args.iterations, args.warmup, driver_worker)))
         return
     for text in args.configs:
         try:
-            config = parse_config(text)
+            config, _ = parse(text)
         except argparse.ArgumentTypeError as error:
             parser.error(str(error))
         if config.policy_lag != 0:
