@@ -248,6 +248,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         policy_lag=args.policy_lag,
         update_threads=args.update_threads,
         engine=args.engine,
+        driver_worker=args.driver_worker,
     )
     row = result.last_row
     print(

@@ -214,6 +214,12 @@ def add_train(sub: Any) -> None:
     add_int(tr, "--seed", 0, "seed of the envs and the learner", least=0)
     add_int(tr, "--torch-threads", 1, "torch CPU threads (learner)")
     tr.add_argument(
+        "--driver-worker",
+        action="store_true",
+        help="the training process steps one Ray worker's envs itself: faster on small "
+        "machines, but an env that crashes its process ends the run (Ray backend only)",
+    )
+    tr.add_argument(
         "--policy-lag",
         type=int,
         default=0,

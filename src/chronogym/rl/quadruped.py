@@ -9,6 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from chronogym.validation import check_bool
+
 ENV_ID = "chronogym/Go1Velocity-v0"
 TERRAINS = ("rigid", "soil")
 BACKENDS = ("ray", "serial")
@@ -134,6 +136,7 @@ def train_quadruped(
     task_kwargs: dict[str, Any] | None = None,
     update_threads: int | None = None,
     engine: str = "mujoco",
+    driver_worker: bool = False,
 ) -> Any:
     """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
 
@@ -145,7 +148,8 @@ def train_quadruped(
     ``task_kwargs``: further ``Go1VelocityTask`` arguments (e.g. the physics step
     ``{"dt": 0.005, "k": 4}``). ``engine="chrono"`` trains the same task in Project Chrono
     (``chronogym/ChronoGo1Velocity-v0``; a MuJoCo checkpoint resumes there unchanged).
-    Returns :class:`~chronogym.rl.TrainResult`.
+    ``driver_worker`` (Ray only): the training process steps one worker's envs itself
+    (``RayVectorEnv(driver_worker=True)``). Returns :class:`~chronogym.rl.TrainResult`.
     """
     from chronogym.rl.config import FINETUNE_PPO
     from chronogym.rl.overlap import check_policy_lag
@@ -156,6 +160,9 @@ def train_quadruped(
     Budget.of(iterations, minutes)  # checked before any worker starts
     check_policy_lag(policy_lag)
     check_engine(engine, terrain)
+    check_bool("driver_worker", driver_worker)
+    if driver_worker and backend != "ray":
+        raise ValueError(f"driver_worker=True with backend={backend!r}: expected backend='ray'")
     if resume is not None and not Path(resume).is_file():
         raise FileNotFoundError(f"resume={str(resume)!r}: no such checkpoint file")
     if update_threads is None:
@@ -171,6 +178,7 @@ def train_quadruped(
         address=address,
         task_kwargs=task_kwargs,
         engine=engine,
+        **({"driver_worker": True} if driver_worker else {}),
     )
     env = RslRlVecEnv(vec, seed=seed)
     try:
