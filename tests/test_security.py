@@ -22,7 +22,7 @@ def test_ray_started_by_chronogym_keeps_auth_and_opens_no_dashboard(tmp_path):
     out = tmp_path / "ports.json"
     env = {**os.environ, "RAY_ADDRESS": ""}
     run = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "ray_ports.py"), "--out", str(out)],
+        [sys.executable, str(ROOT / "benchmarks" / "vector" / "ray_ports.py"), "--out", str(out)],
         capture_output=True, text=True, timeout=300, env=env,
     )  # fmt: skip
     assert run.returncode == 0, run.stderr[-3000:]

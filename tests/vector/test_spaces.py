@@ -182,3 +182,16 @@ def test_wrong_action_count_names_the_counts(ray_cluster):
             vec.step(vec.action_space.sample()[:3])
     finally:
         vec.close()
+
+
+@pytest.mark.parametrize("mode", MODES, ids=lambda m: m.value)
+@pytest.mark.parametrize("name", ["box", "dict", "tuple", "text"])
+def test_driver_worker_matches_sync(ray_cluster, name, mode):
+    space = TESTING_SPACES[name]
+    vec = RayVectorEnv(space_fns(space), envs_per_worker=NUM_ENVS // 2, autoreset_mode=mode,
+                       driver_worker=True)  # fmt: skip
+    try:
+        actions = actions_for(vec)
+        assert_equivalent(rollout(vec, actions, ways=True), sync_rollout(space, mode, actions))
+    finally:
+        vec.close()
