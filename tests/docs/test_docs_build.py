@@ -26,7 +26,15 @@ _REPO_PATH = re.compile(r"\b(?:benchmarks|tests|src/chronogym)/[\w/]+(?:\.py|/)"
 
 
 def _missing(*modules: str) -> list[str]:
-    return [m for m in modules if importlib.util.find_spec(m) is None]
+    return [m for m in modules if not _installed(m)]
+
+
+def _installed(module: str) -> bool:
+    """Whether ``module`` can be imported (a submodule of a missing package cannot)."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
 
 
 @pytest.mark.skipif(
