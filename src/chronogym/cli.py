@@ -59,7 +59,9 @@ def run_episodes(vec, steps: int, seed: int, noise: float, progress: bool) -> di
 CONTROL_PERIOD_S = 0.02  # the demo cart-pole's decision period (50 Hz) at any tick count
 
 
-def compare_backends(args: argparse.Namespace, ticks: int, steps: int, progress: bool) -> tuple:
+def compare_backends(
+    args: argparse.Namespace, ticks: int, steps: int, progress: bool, driver_worker: bool = False
+) -> tuple:
     """The demo workload (cart-poles at ``ticks`` physics ticks per step) on Ray and serially:
     (Ray stats, serial stats, workers, envs per worker, CPUs per worker, start-up seconds)."""
     from chronogym import RayVectorEnv, SerialVectorEnv
@@ -72,6 +74,7 @@ def compare_backends(args: argparse.Namespace, ticks: int, steps: int, progress:
         envs_per_worker=args.envs_per_worker,
         address=args.address,
         env_kwargs=env_kwargs,
+        driver_worker=driver_worker,
     )
     layout = (vec.num_workers, vec.envs_per_worker, vec.num_cpus_per_worker)
     ready = time.perf_counter() - started
@@ -125,6 +128,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
             f"one process ({ratio:.2f}x): a remote step costs more than the physics it runs"
             + ("" if ratio < 1 else "; here it still paid")
         )
+        own, own_serial, *_ = compare_backends(
+            args, args.cheap_ticks, args.steps, progress=False, driver_worker=True
+        )
+        same = own["trajectory_sha256"] == own_serial["trajectory_sha256"]
+        print(
+            "  the same with driver_worker=True (the driver steps one worker's envs itself): "
+            f"{own['env_steps_per_s'] / own_serial['env_steps_per_s']:.2f}x"
+            + ("" if same else " -- TRAJECTORIES DIFFER")
+        )
+        identical = identical and same
     return 0 if identical else 1
 
 
