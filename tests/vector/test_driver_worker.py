@@ -15,10 +15,13 @@ from chronogym import RayVectorEnv, SerialVectorEnv
 from chronogym.vector.driver_worker import DriverWorkerBackend
 
 
+@pytest.mark.parametrize("transport", ["socket", "actor"])
 @pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
-def test_matches_serial_in_both_autoreset_modes(ray_cluster, mode):
+def test_matches_serial_in_both_autoreset_modes(ray_cluster, mode, transport):
     reference = vector_rollout(SerialVectorEnv(ENV_ID, 5, autoreset_mode=mode), 80)
-    vec = RayVectorEnv(ENV_ID, 5, envs_per_worker=2, autoreset_mode=mode, driver_worker=True)
+    vec = RayVectorEnv(
+        ENV_ID, 5, envs_per_worker=2, autoreset_mode=mode, driver_worker=True, transport=transport
+    )
     assert isinstance(vec._backend, DriverWorkerBackend)
     pids = vec.worker_pids()
     assert pids[-1] == os.getpid() and os.getpid() not in pids[:-1]
@@ -58,6 +61,14 @@ def test_a_killed_ray_worker_is_still_replaced(ray_cluster):
     assert truncated.tolist() == [True, True, False, False]
     assert info["_worker_restarted"].tolist() == [True, True, False, False]
     vec.step(actions)  # the run goes on
+    vec.close()
+
+
+def test_all_envs_in_the_driver_start_no_actor(ray_cluster):
+    vec = RayVectorEnv(ENV_ID, 3, envs_per_worker=3, driver_worker=True)
+    assert vec.worker_pids() == [os.getpid()]
+    reference = vector_rollout(SerialVectorEnv(ENV_ID, 3), 20)
+    assert data_equivalence(vector_rollout(vec, 20), reference, exact=True)
     vec.close()
 
 
