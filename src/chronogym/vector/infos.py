@@ -93,10 +93,6 @@ def to_columns(infos: Sequence[dict[str, Any]]) -> InfoColumns | Infos | None:
     return InfoColumns(len(infos), tuple(first), tuple(kinds), tuple(data))
 
 
-def empty_infos(count: int) -> Infos:
-    return [{} for _ in range(count)]
-
-
 def join_infos(parts: Sequence[InfoColumns | Infos | None], counts: Sequence[int]) -> dict:
     """One Gymnasium vector info from each worker's part (``counts[w]`` envs each)."""
     if parts and all(isinstance(p, InfoColumns) for p in parts):
@@ -106,7 +102,7 @@ def join_infos(parts: Sequence[InfoColumns | Infos | None], counts: Sequence[int
     flat: Infos = []
     for part, count in zip(parts, counts, strict=True):
         if part is None:
-            flat.extend(empty_infos(count))
+            flat.extend({} for _ in range(count))
         elif isinstance(part, InfoColumns):
             flat.extend(part.per_env())
         else:

@@ -1,13 +1,15 @@
 """The bottom layer of the vector envs: what crosses between driver and workers.
 
-Both sides import this module and nothing above it: the outcome of a worker
+Both sides import this module and, below it, only :mod:`chronogym.vector.infos` (how
+infos travel) and :mod:`chronogym.errors`: the outcome of a worker
 call, what a worker reports besides its results (restarts, a failed step), the
 ``Backend`` interface the driver talks to, and the byte format of a packed
 step (Box spaces) as the socket transport sends it.
 
 Packed step (``EnvGroup.step_packed``): the request is the action bytes; the
 answer is ``(obs, rewards, terminations, truncations)`` as bytes, then the
-infos (None when all are empty), the restarts (None when none) and, when the
+infos (:func:`~chronogym.vector.infos.to_columns`: None when all are empty, else
+columns or per-env dicts), the restarts (None when none) and, when the
 driver asked for timings, ``(serde_s, compute_s)``. On a socket, an answer is
 ``<B 5I`` (status, then the lengths of obs, rewards, terminations, truncations
 and tail) + those parts; the tail is the pickled extras when any is set, or a
