@@ -75,6 +75,30 @@ BAD_INPUTS: dict[str, tuple[list[str], str]] = {
         "--out={tmp}/a_file: cannot create this folder",
     ),
     "Ray address": (["demo", "--address", "nowhere"], "Ray address 'nowhere': expected"),
+    "negative --eval-episodes": (
+        ["train", "quadruped", "--minutes", "1", "--eval-episodes", "-1"],
+        "--eval-episodes=-1: expected an integer >= 0",
+    ),
+    "--friction LO > HI": (
+        ["play", "quadruped", "x.pt", "--friction", "1.0", "0.5"],
+        "--friction 1 0.5: expected 0 < LO <= HI",
+    ),
+    "--friction zero": (
+        ["play", "quadruped", "x.pt", "--friction", "0", "1"],
+        "--friction 0 1: expected 0 < LO <= HI",
+    ),
+    "--friction one value": (
+        ["play", "quadruped", "x.pt", "--friction", "0.5"],
+        "--friction: expected 2 arguments",
+    ),
+    "zero --push-velocity": (
+        ["play", "quadruped", "x.pt", "--push", "--push-velocity", "0"],
+        "--push-velocity=0.0: expected a number > 0",
+    ),
+    "NaN --push-interval": (
+        ["play", "quadruped", "x.pt", "--push", "--push-interval", "nan"],
+        "--push-interval=nan: expected a number > 0",
+    ),
 }
 
 

@@ -8,9 +8,15 @@ summary and ``rl_scaling.png``.
     python benchmarks/rl/rl_scaling.py                  # short budget: 2 min per configuration
     python benchmarks/rl/rl_scaling.py --full           # 30 min per configuration
     python benchmarks/rl/rl_scaling.py --minutes 5 --configs ray-16 serial-16
+    python benchmarks/rl/rl_scaling.py --engine chrono --resume runs/go1/best.pt --finetune
 
 Configuration names are ``<backend>-<n_env>``; the serial backend steps its envs one after
 another in the training process (the paper's "no Ray" baseline, same env code).
+``--engine chrono`` trains the same task in Project Chrono (PyChrono needed; results in
+``results/rl_scaling_chrono/``), the engine the paper ran its quadruped in; ``--resume CKPT``
+starts every configuration from a checkpoint (e.g. a MuJoCo-trained ``best.pt``) instead of
+from scratch, with ``--finetune`` under the paper's conservative PPO settings. Checkpoints
+are not scored for ``best.pt`` here (``eval_episodes=0``): the budget is all training.
 """
 
 from __future__ import annotations
@@ -29,6 +35,11 @@ from common import RESULTS, Column, header, pyplot, save_figure, table, write_js
 
 DEFAULT_OUT = RESULTS / "rl_scaling"
 DEFAULT_RUNS = Path("runs") / "rl_scaling"  # checkpoints and TensorBoard events (not results)
+#: ``--engine`` -> (results folder, runs folder) when ``--out`` / ``--runs`` are not given
+ENGINE_FOLDERS = {
+    "mujoco": (DEFAULT_OUT, DEFAULT_RUNS),
+    "chrono": (RESULTS / "rl_scaling_chrono", Path("runs") / "rl_scaling_chrono"),
+}
 DEFAULT_CONFIGS = ("ray-1", "ray-8", "ray-16", "serial-16")
 SHORT_MINUTES = 2.0
 FULL_MINUTES = 30.0
@@ -52,6 +63,7 @@ def run_config(
 
     backend, num_envs = parse_config(name)
     shutil.rmtree(runs / name, ignore_errors=True)  # a fresh progress.csv for the figure
+    train_kwargs = {"eval_episodes": 0, **train_kwargs}
     result = train_quadruped(
         runs / name, num_envs=num_envs, backend=backend, minutes=minutes, seed=seed, **train_kwargs
     )
@@ -140,7 +152,10 @@ def write_results(summaries: list[dict], out: Path, name: str, title: str, **fie
 
 
 def add_run_flags(
-    parser: argparse.ArgumentParser, configs: tuple[str, ...], out: Path, runs: Path
+    parser: argparse.ArgumentParser,
+    configs: tuple[str, ...],
+    out: Path | None,
+    runs: Path | None,
 ) -> None:
     """``--configs``, ``--seed``, ``--out`` and ``--runs`` (also ``soil_finetune.py``'s)."""
     parser.add_argument("--configs", nargs="+", default=list(configs))
@@ -180,18 +195,39 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=None, help="budget per configuration")
     parser.add_argument("--full", action="store_true", help=f"{FULL_MINUTES:g} min each")
-    add_run_flags(parser, DEFAULT_CONFIGS, DEFAULT_OUT, DEFAULT_RUNS)
+    parser.add_argument("--engine", choices=sorted(ENGINE_FOLDERS), default="mujoco")
+    parser.add_argument("--resume", type=Path, help="checkpoint to start from (default: scratch)")
+    parser.add_argument("--finetune", action="store_true", help="the paper's conservative PPO")
+    add_run_flags(parser, DEFAULT_CONFIGS, None, None)
     args = parser.parse_args()
+    default_out, default_runs = ENGINE_FOLDERS[args.engine]
+    args.out = args.out or default_out
+    args.runs = args.runs or default_runs
     minutes = args.minutes or (FULL_MINUTES if args.full else SHORT_MINUTES)
     check_run_flags(parser, args, minutes)
-    summaries = run_configs(args, minutes, f"{minutes:g} min")
+    if args.resume is not None and not args.resume.is_file():
+        parser.error(f"--resume={args.resume}: no such checkpoint file")
+    if args.finetune and args.resume is None:
+        parser.error("--finetune: expected --resume CKPT too (fine-tuning needs a policy)")
+    try:
+        from chronogym.rl.quadruped import check_engine
+
+        check_engine(args.engine)
+    except (ValueError, ImportError) as error:
+        parser.error(f"--engine {args.engine}: {error}")
+    start = f"fine-tuned from {args.resume}" if args.resume else "from scratch"
+    summaries = run_configs(
+        args, minutes, f"{minutes:g} min, {start}", engine=args.engine, resume=args.resume,
+        finetune=args.finetune,
+    )  # fmt: skip
     title = (
-        f"Go1 velocity tracking, PPO [512, 256, 128], {minutes:g} min per configuration, "
-        f"{os.cpu_count()} CPUs"
+        f"Go1 velocity tracking in {args.engine}, PPO [512, 256, 128], {start}, "
+        f"{minutes:g} min per configuration, {os.cpu_count()} CPUs"
     )
     write_results(
-        summaries, args.out, "rl_scaling", title, minutes_per_config=minutes, seed=args.seed
-    )
+        summaries, args.out, "rl_scaling", title, minutes_per_config=minutes, seed=args.seed,
+        engine=args.engine, start=start,
+    )  # fmt: skip
 
 
 if __name__ == "__main__":

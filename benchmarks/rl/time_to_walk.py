@@ -1,31 +1,44 @@
-"""Time-to-walk: wall-clock from the start of PPO training to the first walking checkpoint.
+"""Time-to-walk: env steps from the start of PPO training to the first walking checkpoint.
 
-Each configuration trains the Go1 from scratch, once per seed, for ``--minutes``, saving a
-checkpoint every ``--save-interval`` iterations. After all training (so evaluation never
-slows it), each run's checkpoints are checked in order with the walking criterion of
-``chronogym play``'s standard commands (``WalkingCriterion``: 5 episodes per command with
-fixed seeds, survival 100 %, x- and y-velocity MSE <= 0.01 (m/s)² for every command), until
-the first that passes; its wall time (from the run's ``progress.csv``) is the run's
-time-to-walk. Writes ``time_to_walk.json``, ``time_to_walk.csv`` (every checkpoint checked)
-and ``time_to_walk.png`` (commands passed and worst MSE against wall clock, one line per run).
+Each configuration trains the Go1 from scratch, once per seed, for ``--env-steps`` (or
+``--minutes``), saving a checkpoint every ``--save-interval`` iterations (50: every 76,800
+env steps at 32 envs x 48 steps). After training, each run's checkpoints are checked in order
+with the walking criterion of ``chronogym play``'s standard commands (``WalkingCriterion``:
+5 episodes per command with fixed seeds, survival 100 %, x- and y-velocity MSE <= 0.01 (m/s)²
+for every command) until the first that passes; its env steps (from the run's
+``progress.csv``) are the run's time-to-walk, with the minutes it took on this machine beside
+them (minutes differ ~1.5x between machines of one kind; env steps do not). The run's
+``best.pt`` (kept during training from a smaller evaluation at each save point) and its last
+checkpoint are then checked with the whole criterion too.
 
-    python benchmarks/rl/time_to_walk.py --configs serial:32:0:48:5:1 ray:32:0 --seeds 0 1
-    python benchmarks/rl/time_to_walk.py --evaluate-only      # re-check the runs already there
-    python benchmarks/rl/time_to_walk.py --configs ray:32:0:48 --seeds 2 --keep   # add a seed
+Writes ``time_to_walk.json`` (per configuration: settings, PPO settings, the median env
+steps; per run: env steps and minutes to walk, best and last checkpoint), ``time_to_walk.csv``
+(every checkpoint checked) and ``time_to_walk.png`` (commands passed and worst MSE against
+env steps, one line per run).
+
+    python benchmarks/rl/time_to_walk.py                      # the default, seeds 0-4
+    python benchmarks/rl/time_to_walk.py --configs ray:32:0:48+ent1e-3 --seeds 1 2 --keep
+    python benchmarks/rl/time_to_walk.py --evaluate-only --keep   # re-check the runs there
+    python benchmarks/rl/time_to_walk.py --merge /tmp/a /tmp/b --keep   # invocations run apart
 
 A configuration is as in ``train_throughput.py``
-(``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``);
-``serial:32:0:48:5:1`` is serial, synchronous PPO at 5 ms physics with a 1-thread update;
-``ray:32:0:48`` is the default of ``chronogym train quadruped``.
+(``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``)
+plus ``+lever`` suffixes from :data:`VARIANTS` (PPO overrides and task arguments measured
+against the default, e.g. ``ray:32:0:48+init_noise``); ``ray:32:0:48`` is the default of
+``chronogym train quadruped``. ``serial:32:0:48`` trains number for number the same
+(same envs, same update threads) and is how two runs share 2 cores side by side.
 ``--keep`` keeps the runs (configuration and seed) already in ``--out`` that this invocation
-does not run; a configuration's settings then list every seed it has, and the machine record
-(with its date) of the invocation that ran a kept configuration stays in ``earlier_machines``.
+does not run; ``--merge DIR ...`` adds the runs of other invocations' ``--out`` folders
+(later folders win) without training or checking anything. A configuration's settings list
+every seed it has, and the machine record of an invocation that ran a kept configuration
+stays in ``earlier_machines``.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import statistics
 import sys
@@ -44,22 +57,75 @@ def run_name(config: str, seed: int) -> str:
     return f"{config.replace(':', '-')}-s{seed}"
 
 
-def train_run(config: str, seed: int, minutes: float, save_interval: int, runs: Path) -> Path:
-    """Train one run from scratch; its folder (``progress.csv``, ``model_<it>.pt``)."""
+#: Levers measured against the default, added to a configuration as ``+name`` (several may
+#: be chained: ``ray:32:0:48+ppo_anchor+init_noise``): PPO overrides and task arguments.
+VARIANTS: dict[str, dict[str, Any]] = {
+    "ppo_anchor": {"ppo": {"algorithm": {"learning_rate": 3e-4, "entropy_coef": 0.001}}},
+    "lr3e-4": {"ppo": {"algorithm": {"learning_rate": 3e-4}}},
+    "ppo_before": {"ppo": {"algorithm": {"learning_rate": 1e-4, "entropy_coef": 0.01}}},
+    "lr1e-4": {"ppo": {"algorithm": {"learning_rate": 1e-4}}},
+    "ent1e-2": {"ppo": {"algorithm": {"entropy_coef": 0.01}}},
+    "init_noise": {"task": {"reset_joint_scale": (0.5, 1.5), "reset_base_velocity": 0.5}},
+    "vx1.5": {"task": {"commands": {"vx": (-0.5, 1.5)}}},
+    "zero_cmd": {"task": {"commands": {"zero_below": 0.2, "standing_share": 0.1}}},
+    "axis_cmd": {"task": {"commands": {"single_axis_share": 0.3, "standing_share": 0.1}}},
+}
+
+
+def split_config(text: str) -> tuple[str, list[str]]:
+    """``"ray:32:0:48+a+b"`` -> ``("ray:32:0:48", ["a", "b"])``, checking both parts."""
+    base, *variants = text.split("+")
+    parse_config(base)
+    for name in variants:
+        if name not in VARIANTS:
+            raise argparse.ArgumentTypeError(
+                f"config {text!r}: unknown variant {name!r}; expected one of {sorted(VARIANTS)}"
+            )
+    return base, variants
+
+
+def variant_settings(text: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The PPO overrides and task arguments of a configuration's variants."""
+    from chronogym.rl.config import _merge
+
+    base, variants = split_config(text)
+    ppo: dict[str, Any] = {}
+    task: dict[str, Any] = dict(parse_config(base).task_kwargs())
+    for name in variants:
+        _merge(ppo, VARIANTS[name].get("ppo", {}))
+        _merge(task, VARIANTS[name].get("task", {}))
+    if "commands" in task:
+        from chronogym.tasks.quadruped.config import CommandRanges
+
+        task["commands"] = CommandRanges(**task["commands"])
+    return ppo, task
+
+
+def train_run(
+    config: str, seed: int, budget: dict[str, float], save_interval: int, runs: Path
+) -> Path:
+    """Train one run from scratch; its folder (``progress.csv``, ``model_<it>.pt``).
+    ``budget``: ``{"env_steps": n}`` or ``{"minutes": m}``."""
     import shutil
 
     from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
 
-    c = parse_config(config)
+    c = parse_config(split_config(config)[0])
+    ppo, task = variant_settings(config)
     out = runs / run_name(config, seed)
     shutil.rmtree(out, ignore_errors=True)
-    overrides: dict[str, Any] = {"save_interval": save_interval}
+    overrides: dict[str, Any] = {**ppo, "save_interval": save_interval}
     if c.steps:
         overrides["num_steps_per_env"] = c.steps
+    cfg = quadruped_train_config(**overrides)
+    if "env_steps" in budget:
+        per_iteration = c.num_envs * cfg["num_steps_per_env"]
+        limit = {"iterations": math.ceil(budget["env_steps"] / per_iteration)}
+    else:
+        limit = {"minutes": budget["minutes"]}
     train_quadruped(
-        out, num_envs=c.num_envs, backend=c.backend, minutes=minutes, seed=seed,
-        policy_lag=c.policy_lag, train_cfg=quadruped_train_config(**overrides),
-        task_kwargs=c.task_kwargs(), update_threads=c.update_threads,
+        out, num_envs=c.num_envs, backend=c.backend, seed=seed, policy_lag=c.policy_lag,
+        train_cfg=cfg, task_kwargs=task, update_threads=c.update_threads, **limit,
     )  # fmt: skip
     return out
 
@@ -76,69 +142,123 @@ def checkpoints(run: Path) -> list[tuple[int, float, int, Path]]:
     return sorted(found)
 
 
-def evaluate_run(run: Path, criterion: Any, config: str) -> list[dict[str, Any]]:
+def check(env: Any, path: Path, criterion: Any) -> tuple[bool, int, float]:
+    """Whether the checkpoint at ``path`` walks, the commands it passes in order, and the worst
+    x/y MSE over the commands checked (stopping at the first that fails)."""
+    from chronogym.rl.checkpoint import load_policy
+    from chronogym.rl.evaluate import check_walking
+
+    walks, summary = check_walking(env, load_policy(path), criterion)
+    passed = sum(criterion.passes(r) for r in summary)
+    worst = max(max(r["x_vel_mse"], r["y_vel_mse"]) for r in summary)
+    return walks, passed, worst
+
+
+def evaluate_run(run: Path, criterion: Any, config: str) -> tuple[list[dict[str, Any]], dict]:
     """Check the run's checkpoints in order until one walks, on the physics step the run
-    trained with; one row per checkpoint."""
+    trained with (one row per checkpoint); then its ``best.pt`` and last checkpoint."""
     import gymnasium as gym
 
     import chronogym  # noqa: F401
-    from chronogym.rl.evaluate import check_walking
+    from chronogym.rl.best import read_best
     from chronogym.rl.quadruped import ENV_ID
-    from chronogym.rl.trainer import load_policy
 
-    env = gym.make(ENV_ID, **parse_config(config).task_kwargs())
+    env = gym.make(ENV_ID, **parse_config(split_config(config)[0]).task_kwargs())
     rows = []
+    found = checkpoints(run)
     try:
-        for it, wall, steps, path in checkpoints(run):
-            walks, summary = check_walking(env, load_policy(path), criterion)
-            passed = sum(criterion.passes(r) for r in summary)
-            worst = max(max(r["x_vel_mse"], r["y_vel_mse"]) for r in summary)
+        for it, wall, steps, path in found:
+            walks, passed, worst = check(env, path, criterion)
             rows.append({
                 "run": run.name, "iteration": it, "wall_time": wall, "env_steps": steps,
                 "commands_passed": passed, "worst_mse": worst, "walks": walks,
             })  # fmt: skip
-            print(f"  {run.name} it {it:5d} {wall / 60:6.2f} min: {passed} commands pass"
+            print(f"  {run.name} it {it:5d} {steps / 1e6:5.2f} M steps: {passed} commands pass"
                   f"{' -> WALKS' if walks else ''}", flush=True)  # fmt: skip
             if walks:
                 break
+        ends = {"last": {"iteration": found[-1][0], "env_steps": found[-1][2]}}
+        ends["last"]["walks"] = check(env, found[-1][3], criterion)[0]
+        best = read_best(run)
+        if best is not None:
+            ends["best"] = {**best, "walks": check(env, run / "best.pt", criterion)[0]}
     finally:
         env.close()
-    return rows
+    return rows, ends
 
 
-def plot(rows: list[dict[str, Any]], criterion: Any, path: Path) -> None:
-    fig, (left, right) = pyplot().subplots(1, 2, figsize=(12, 4.2))
+def plot(rows: list[dict[str, Any]], criterion: Any, budget: float, path: Path) -> None:
+    fig, (left, right) = pyplot().subplots(1, 2, figsize=(12, 4.4))
     configs = list(dict.fromkeys(r["config"] for r in rows))
     colors = pyplot().get_cmap("tab10")
     styles = ("-", "--", ":", "-.", (0, (6, 2, 1, 2, 1, 2)))  # colour: config; style: seed
     for run in dict.fromkeys(r["run"] for r in rows):
         mine = [r for r in rows if r["run"] == run]
-        minutes = [r["wall_time"] / 60 for r in mine]
+        steps = [r["env_steps"] / 1e6 for r in mine]
         color = colors(configs.index(mine[0]["config"]) % 10)
         style = styles[int(mine[0]["seed"]) % len(styles)]
+        label = f"{mine[0]['config']} s{mine[0]['seed']}"
         for axis, key in ((left, "commands_passed"), (right, "worst_mse")):
-            values = [r[key] for r in mine]
-            axis.plot(minutes, values, marker=".", color=color, ls=style, label=run)
-    left.set_ylabel(f"commands passed (of {len(criterion.commands)})")
+            axis.plot(steps, [r[key] for r in mine], marker=".", color=color, ls=style,
+                      label=label)  # fmt: skip
+    left.set_ylabel(f"commands passed in order (of {len(criterion.commands)})")
     right.set_ylabel("worst episode-mean x/y velocity MSE (m/s)²")
     right.axhline(criterion.max_x_mse, color="k", lw=0.8, ls="--")
     right.set_yscale("log")
     for axis in (left, right):
-        axis.set_xlabel("wall-clock time since training started (min)")
+        axis.axvline(budget / 1e6, color="grey", lw=0.8, ls=":")
+        axis.set_xlabel("env steps since training started (millions)")
         axis.grid(alpha=0.3)
-    left.legend(fontsize=8)
-    fig.suptitle("Go1 time-to-walk (commands evaluated in order until one fails)")
+    left.legend(fontsize=7)
+    fig.suptitle("Go1 time-to-walk: checkpoints checked in order until one walks")
     save_figure(fig, path)
+
+
+def summarize_run(config: str, seed: int, rows: list[dict[str, Any]], ends: dict, run: Path):
+    """The JSON record of one run."""
+    walked = [r for r in rows if r["walks"]]
+    last = checkpoints(run)[-1]
+    return {
+        "config": config, "seed": seed,
+        "env_steps_to_walk": walked[0]["env_steps"] if walked else None,
+        "minutes_to_walk": walked[0]["wall_time"] / 60 if walked else None,
+        "iteration_to_walk": walked[0]["iteration"] if walked else None,
+        "trained_env_steps": last[2], "trained_min": last[1] / 60, **ends,
+    }  # fmt: skip
+
+
+def medians(summary: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per configuration: runs that walked, median env steps and minutes to walk (a run that
+    never walked counts as longer than any that did; None if that is the median)."""
+    out = {}
+    for config in dict.fromkeys(s["config"] for s in summary):
+        mine = [s for s in summary if s["config"] == config]
+        med = {}
+        for key in ("env_steps_to_walk", "minutes_to_walk"):
+            value = statistics.median(math.inf if s[key] is None else s[key] for s in mine)
+            med[key] = None if math.isinf(value) else value
+        walked = sum(s["env_steps_to_walk"] is not None for s in mine)
+        out[config] = {"walked": f"{walked}/{len(mine)}", **med}
+        shown = ", ".join(
+            f"s{s['seed']}: " + ("-" if s["env_steps_to_walk"] is None
+                                 else f"{s['env_steps_to_walk'] / 1e6:.2f} M")
+            for s in mine
+        )  # fmt: skip
+        steps = med["env_steps_to_walk"]
+        print(f"{config:<28} walked {walked}/{len(mine)}; median "
+              f"{'-' if steps is None else f'{steps / 1e6:.2f} M'} env steps; {shown}")  # fmt: skip
+    return out
 
 
 def main(argv: list[str] | None = None) -> None:
     from chronogym.rl.evaluate import WalkingCriterion
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--configs", nargs="+", default=["serial:32:0:48:5:1", "ray:32:0:48"])
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    parser.add_argument("--minutes", type=float, default=12.0, help="training budget per run")
-    parser.add_argument("--save-interval", type=int, default=40, help="iterations")
+    parser.add_argument("--configs", nargs="+", default=["ray:32:0:48"])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    parser.add_argument("--env-steps", type=float, default=1.5e6, help="training budget per run")
+    parser.add_argument("--minutes", type=float, help="training budget instead of --env-steps")
+    parser.add_argument("--save-interval", type=int, default=50, help="iterations")
     parser.add_argument("--max-mse", type=float, default=0.01, help="(m/s)², x and y")
     parser.add_argument("--evaluate-only", action="store_true")
     parser.add_argument(
@@ -146,80 +266,76 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="keep the runs (config and seed) already in --out that this invocation does not run",
     )
+    parser.add_argument("--merge", nargs="+", type=Path, default=[], metavar="DIR",
+                        help="only merge these result folders into --out")  # fmt: skip
     parser.add_argument("--runs", type=Path, default=RUNS)
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args(argv)
-    for config in args.configs:
-        parse_config(config)
-    if not args.minutes > 0 or args.save_interval < 1:
-        parser.error(f"--minutes={args.minutes} --save-interval={args.save_interval}: "
-                     "expected minutes > 0 and an interval >= 1")  # fmt: skip
+    try:
+        for config in args.configs:
+            split_config(config)
+    except argparse.ArgumentTypeError as error:
+        parser.error(str(error))
+    budget = {"minutes": args.minutes} if args.minutes else {"env_steps": args.env_steps}
+    if not next(iter(budget.values())) > 0 or args.save_interval < 1:
+        parser.error(f"budget {budget}, --save-interval={args.save_interval}: expected a "
+                     "budget > 0 and an interval >= 1")  # fmt: skip
     try:
         criterion = WalkingCriterion(max_x_mse=args.max_mse, max_y_mse=args.max_mse)
     except ValueError as error:
         parser.error(f"--max-mse: {error}")
-    runs = [(c, s) for c in args.configs for s in args.seeds]
+    runs = [] if args.merge else [(c, s) for c in args.configs for s in args.seeds]
     if not args.evaluate_only:
         for config, seed in runs:
-            print(f"training {config} seed {seed} for {args.minutes} min", flush=True)
-            train_run(config, seed, args.minutes, args.save_interval, args.runs)
+            print(f"training {config} seed {seed} for {budget}", flush=True)
+            train_run(config, seed, budget, args.save_interval, args.runs)
     rows: list[dict[str, Any]] = []
     summary = []
     for config, seed in runs:
-        checked = evaluate_run(args.runs / run_name(config, seed), criterion, config)
+        run = args.runs / run_name(config, seed)
+        checked, ends = evaluate_run(run, criterion, config)
         rows += [{"config": config, "seed": seed, **r} for r in checked]
-        walked = [r for r in checked if r["walks"]]
-        summary.append({
-            "config": config, "seed": seed,
-            "time_to_walk_min": walked[0]["wall_time"] / 60 if walked else None,
-            "env_steps": walked[0]["env_steps"] if walked else None,
-            "trained_min": checkpoints(args.runs / run_name(config, seed))[-1][1] / 60,
-        })  # fmt: skip
-    earlier = load_earlier(args.out, set(runs)) if args.keep else {"rows": [], "runs": []}
+        summary.append(summarize_run(config, seed, checked, ends, run))
+    sources = ([args.out] if args.keep else []) + list(args.merge)
+    earlier = load_earlier(sources, set(runs))
     rows = earlier["rows"] + rows
     summary = earlier["runs"] + summary
-    configs = list(dict.fromkeys([s["config"] for s in summary]))
-    medians = {}
-    for config in configs:
-        times = [s["time_to_walk_min"] for s in summary if s["config"] == config]
-        # a run that never walked counts as longer than its budget
-        ranked = [t if t is not None else math.inf for t in times]
-        medians[config] = statistics.median(ranked)
-        shown = ", ".join("-" if t is None else f"{t:.1f}" for t in times)
-        print(f"{config:<16} time-to-walk (min): median {medians[config]:.1f}; runs {shown}")
+    per_config = medians(summary)
     args.out.mkdir(parents=True, exist_ok=True)
     with (args.out / "time_to_walk.csv").open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["config"])
         writer.writeheader()
         writer.writerows(rows)
-    plot(rows, criterion, args.out / "time_to_walk.png")
+    plot(rows, criterion, args.env_steps, args.out / "time_to_walk.png")
+    ran = {c: merged_settings(args, c, earlier["settings"].get(c)) for c in args.configs if runs}
     record = {
         **header("time_to_walk", "torch", "rsl-rl-lib"),
-        "settings": {**earlier.get("settings", {}),
-                     **{config: merged_settings(args, earlier.get("settings", {}).get(config))
-                        for config in args.configs}},
+        "settings": {**earlier["settings"], **ran},
         "criterion": {"max_x_mse": criterion.max_x_mse, "max_y_mse": criterion.max_y_mse,
                       "episodes": criterion.episodes, "commands": criterion.commands},
-        "median_min": {k: (None if math.isinf(v) else v) for k, v in medians.items()},
+        "configs": per_config,
         "runs": summary,
     }  # fmt: skip
-    if earlier.get("machines"):
+    if earlier["machines"]:
         record["earlier_machines"] = earlier["machines"]
     write_json(args.out / "time_to_walk.json", record)
 
 
-def ppo_settings() -> dict[str, Any]:
-    """The PPO settings the runs trained with (``quadruped_train_config``'s algorithm and
-    initial action noise)."""
+def ppo_settings(config: str) -> dict[str, Any]:
+    """The PPO settings a configuration trains with (``quadruped_train_config``'s algorithm
+    with the configuration's overrides, and the initial action noise)."""
     from chronogym.rl.quadruped import quadruped_train_config
 
-    cfg = quadruped_train_config()
+    cfg = quadruped_train_config(**variant_settings(config)[0])
     return {**cfg["algorithm"], "init_std": cfg["actor"]["distribution_cfg"]["init_std"]}
 
 
-def merged_settings(args: argparse.Namespace, earlier: dict[str, Any] | None) -> dict[str, Any]:
-    """This invocation's settings of a configuration, with the seeds of its kept runs."""
-    current = {**settings(args), "ppo": ppo_settings()}
+def merged_settings(
+    args: argparse.Namespace, config: str, earlier: dict[str, Any] | None
+) -> dict[str, Any]:
+    """This invocation's settings of ``config``, with the seeds of its kept runs."""
+    current = {**settings(args), "ppo": ppo_settings(config)}
+    current["task"] = {k: repr(v) for k, v in variant_settings(config)[1].items()}
     if earlier:
         current["seeds"] = sorted(set(earlier.get("seeds", [])) | set(args.seeds))
         if earlier.get("note"):
@@ -227,31 +343,50 @@ def merged_settings(args: argparse.Namespace, earlier: dict[str, Any] | None) ->
     return current
 
 
-def load_earlier(out: Path, running: set[tuple[str, int]]) -> dict[str, Any]:
-    """The rows, run summaries, settings and machine records in ``out`` of the runs
-    (configuration, seed) that are not in ``running``."""
-    path = out / "time_to_walk.json"
-    if not path.exists():
-        return {"rows": [], "runs": []}
-    import json
+def load_earlier(sources: list[Path], running: set[tuple[str, int]]) -> dict[str, Any]:
+    """The rows, run summaries, settings and machine records in the result folders
+    ``sources`` (a later folder's run replaces an earlier one's) of the runs (configuration,
+    seed) that are not in ``running``."""
+    found: dict[tuple[str, int], dict[str, Any]] = {}
+    settings_kept: dict[str, Any] = {}
+    machines: dict[str, Any] = {}
+    for out in sources:
+        path = out / "time_to_walk.json"
+        if not path.exists():
+            continue
+        record = json.loads(path.read_text())
+        with (out / "time_to_walk.csv").open(newline="") as handle:
+            rows = list(csv.DictReader(handle))
+        for run in record.get("runs", []):
+            key = (run["config"], int(run["seed"]))
+            if key in running:
+                continue
+            mine = [r for r in rows if (r["config"], int(r["seed"])) == key]
+            found[key] = {"run": run, "rows": [as_numbers(r) for r in mine]}
+            if run["config"] in record.get("settings", {}):
+                kept = settings_kept.setdefault(run["config"], record["settings"][run["config"]])
+                kept["seeds"] = sorted(set(kept.get("seeds", [])) | {key[1]})
+            name = run["config"]
+            machines[name] = record.get("earlier_machines", {}).get(
+                name, {"date": record.get("date"), **record.get("machine", {})}
+            )
+    return {
+        "rows": [r for v in found.values() for r in v["rows"]],
+        "runs": [v["run"] for v in found.values()],
+        "settings": settings_kept,
+        "machines": machines,
+    }
 
-    record = json.loads(path.read_text())
-    kept = [r for r in record.get("runs", []) if (r["config"], int(r["seed"])) not in running]
-    names = {r["config"] for r in kept}
-    pairs = {(r["config"], str(r["seed"])) for r in kept}
-    with (out / "time_to_walk.csv").open(newline="") as handle:
-        rows = [r for r in csv.DictReader(handle) if (r["config"], r["seed"]) in pairs]
-    for row in rows:  # CSV text back to numbers
-        for key in ("seed", "iteration", "env_steps", "commands_passed"):
-            row[key] = int(row[key])
-        for key in ("wall_time", "worst_mse"):
-            row[key] = float(row[key])
-        row["walks"] = row["walks"] == "True"
-    machines = {**record.get("earlier_machines", {})}
-    for name in names:
-        machines.setdefault(name, {"date": record.get("date"), **record.get("machine", {})})
-    settings_kept = {k: v for k, v in record.get("settings", {}).items() if k in names}
-    return {"rows": rows, "runs": kept, "settings": settings_kept, "machines": machines}
+
+def as_numbers(row: dict[str, str]) -> dict[str, Any]:
+    """A ``time_to_walk.csv`` row with its numbers read back."""
+    out: dict[str, Any] = dict(row)
+    for key in ("seed", "iteration", "env_steps", "commands_passed"):
+        out[key] = int(row[key])
+    for key in ("wall_time", "worst_mse"):
+        out[key] = float(row[key])
+    out["walks"] = row["walks"] == "True"
+    return out
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import os
 import sys
 import time
@@ -262,6 +263,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         update_threads=args.update_threads,
         engine=args.engine,
         driver_worker=args.driver_worker,
+        eval_episodes=args.eval_episodes,
     )
     row = result.last_row
     print(
@@ -274,6 +276,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         f"y-velocity MSE {row.get('y_mse', float('nan')):.4f}"
     )
     print(f"  checkpoint {result.checkpoint}; progress {result.csv_path}")
+    if result.best:
+        print(f"  {result.best}")
     print(f"  TensorBoard: tensorboard --logdir {args.out}")
     return 0
 
@@ -283,6 +287,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     from chronogym.rl.evaluate import format_summary
     from chronogym.rl.quadruped import check_can_render, check_engine, play_quadruped
 
+    randomization = play_randomization(args)
     if not os.path.exists(args.checkpoint):
         raise UsageError(f"checkpoint {args.checkpoint!r}: no such file")
     if args.video and os.path.splitext(args.video)[1].lower() not in (".mp4", ".gif", ".png"):
@@ -305,7 +310,10 @@ def cmd_play(args: argparse.Namespace) -> int:
         max_episode_steps=args.steps,
         video_seconds=args.video_seconds,
         engine=args.engine,
+        randomization=randomization,
     )
+    if randomization is not None:
+        print(f"randomization: {describe_randomization(randomization)}")
     print(format_summary(rows))
     if args.video:
         print(f"video: {args.video}")
@@ -340,6 +348,40 @@ def open_study(url: str, study_name: str, sampler: Any) -> Any:
             f"--study={study_name}: cannot create or load it in {url} "
             f"({type(error).__name__}: {first_line(error)})"
         ) from error
+
+
+def play_randomization(args: argparse.Namespace) -> Any:
+    """The ``DomainRandomization`` of ``play --push`` / ``--friction`` (None: neither)."""
+    from chronogym.tasks.quadruped.config import DomainRandomization
+
+    friction = None
+    if args.friction is not None:
+        low, high = args.friction
+        if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
+            raise UsageError(
+                f"--friction {low:g} {high:g}: expected 0 < LO <= HI (friction coefficients)"
+            )
+        friction = (low, high)
+    if not args.push and friction is None:
+        return None
+    return DomainRandomization(
+        friction=friction,
+        added_base_mass=None,
+        push_interval_s=args.push_interval if args.push else None,
+        push_velocity=args.push_velocity if args.push else 0.0,
+    )
+
+
+def describe_randomization(dr: Any) -> str:
+    """One line: the pushes and the friction range of ``play``'s randomization."""
+    parts = []
+    if dr.push_interval_s is not None:
+        parts.append(
+            f"pushes up to {dr.push_velocity:g} m/s per axis every {dr.push_interval_s:g} s"
+        )
+    if dr.friction is not None:
+        parts.append(f"friction uniform in [{dr.friction[0]:g}, {dr.friction[1]:g}]")
+    return "; ".join(parts)
 
 
 def check_checkpoint(path: str, name: str) -> None:

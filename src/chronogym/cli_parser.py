@@ -232,6 +232,13 @@ def add_train(sub: Any) -> None:
         None,
         "torch threads of the synchronous update (default: this machine's CPUs, at most 8)",
     )
+    add_int(
+        tr,
+        "--eval-episodes",
+        2,
+        "episodes per standard command that score each saved checkpoint for best.pt (0: none)",
+        least=0,
+    )
     add_ray_options(tr)
 
 
@@ -261,6 +268,25 @@ def add_play(sub: Any) -> None:
         help="a command to evaluate (repeatable; default: a standard set)",
     )
     add_int(play, "--steps", None, "episode length in steps (default: the task's, 1000)")
+    play.add_argument(
+        "--push",
+        action="store_true",
+        help="kick the base every --push-interval s by up to --push-velocity m/s per axis",
+    )
+    play.add_argument(
+        "--push-velocity", type=float, default=1.0, action=AtLeast, above=0, help="m/s"
+    )
+    play.add_argument(
+        "--push-interval", type=float, default=5.0, action=AtLeast, above=0, help="seconds"
+    )
+    play.add_argument(
+        "--friction",
+        nargs=2,
+        type=float,
+        metavar=("LO", "HI"),
+        help="draw the foot-ground friction of each episode uniformly from [LO, HI] "
+        "(default: the model's)",
+    )
     add_quadruped_world(play)
     add_int(play, "--seed", 0, "seed of the episodes", least=0)
 

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 GO1 = "chronogym/Go1Velocity-v0"
-TIMING_COLUMNS = ("wall_time", "collect_s", "learn_s")
+TIMING_COLUMNS = ("wall_time", "collect_s", "learn_s", "eval_s")
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,7 @@ from chronogym.rl import RslRlVecEnv, ppo_train_config, train
 from chronogym.rl.trainer import CSV_HEADER
 
 CARTPOLE = "chronogym/CartPole-v0"
-TIMING = ("wall_time", "collect_s", "learn_s")
+TIMING = ("wall_time", "collect_s", "learn_s", "eval_s")
 SEED = 3
 
 

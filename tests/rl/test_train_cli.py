@@ -34,6 +34,10 @@ def test_train_resume_and_play_on_the_serial_backend(tmp_path):
     assert "iterations 2, env steps" in first.stdout
     assert iterations(out) == [0, 1]
     assert (out / "latest.pt").is_file() and (out / "model_1.pt").is_file()
+    # the last checkpoint was scored on the walking criterion: it is the best so far
+    assert f"best checkpoint {out / 'best.pt'} = model_1.pt (iteration 1" in first.stdout
+    assert "commands pass, worst MSE" in first.stdout
+    assert (out / "best.pt").read_bytes() == (out / "model_1.pt").read_bytes()
 
     resumed = run_cli(
         "train", "quadruped", "--num-envs", "2", "--backend", "serial", "--iterations", "1",
@@ -52,6 +56,21 @@ def test_train_resume_and_play_on_the_serial_backend(tmp_path):
     assert "x_mse" in lines[0]
     assert lines[1].split()[0:3] == ["(+0.50,", "+0.00,", "+0.00)"]
     assert lines[2].split()[0:3] == ["(+0.00,", "+0.20,", "+0.00)"]
+
+    shaken = run_cli(
+        "play", "quadruped", str(out / "best.pt"), "--steps", "15", "--command", "0.5", "0", "0",
+        "--push", "--push-interval", "0.1", "--friction", "0.4", "0.8",
+    )  # fmt: skip
+    assert shaken.returncode == 0, shaken.stderr[-3000:]
+    shaken_lines = shaken.stdout.strip().splitlines()
+    assert shaken_lines[0] == (
+        "randomization: pushes up to 1 m/s per axis every 0.1 s; friction uniform in [0.4, 0.8]"
+    )
+    calm = run_cli(
+        "play", "quadruped", str(out / "best.pt"), "--steps", "15", "--command", "0.5", "0", "0"
+    )
+    assert calm.returncode == 0, calm.stderr[-3000:]
+    assert shaken_lines[-1] != calm.stdout.strip().splitlines()[-1]  # the kicks moved the base
 
 
 def can_render() -> bool:

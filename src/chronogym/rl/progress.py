@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,9 +24,10 @@ TIMING_COLUMNS = ("collect_s", "learn_s", "policy_lag")
 METRIC_PREFIX = "/metrics/"
 
 
-def progress_columns(metric_columns: Iterable[str]) -> tuple[str, ...]:
-    """The header of a ``progress.csv`` with these metric columns."""
-    return (*RUN_COLUMNS, *metric_columns, *TIMING_COLUMNS)
+def progress_columns(metric_columns: Iterable[str], extra: Iterable[str] = ()) -> tuple[str, ...]:
+    """The header of a ``progress.csv`` with these metric columns (and ``extra`` columns,
+    such as a checkpoint evaluation's, before the timing ones)."""
+    return (*RUN_COLUMNS, *metric_columns, *extra, *TIMING_COLUMNS)
 
 
 class ProgressLog:
@@ -36,17 +37,27 @@ class ProgressLog:
     on. Any other metric gets a column when it is first reported, named by the key without
     ``/metrics/`` (the whole key if that name is taken); the file is then rewritten with the
     wider header and the earlier rows read NaN there. ``append`` continues an existing file
-    and its columns; otherwise the file starts anew.
+    and its columns; otherwise the file starts anew. ``extra`` columns (e.g. a checkpoint
+    evaluation's) are filled from the values given to :meth:`write`, NaN in rows without them.
     """
 
-    def __init__(self, path: Path, pinned: Mapping[str, str], *, append: bool = False) -> None:
+    def __init__(
+        self,
+        path: Path,
+        pinned: Mapping[str, str],
+        *,
+        append: bool = False,
+        extra: Sequence[str] = (),
+    ) -> None:
         self.path = Path(path)
         self.metrics: dict[str, str] = {key: column for column, key in pinned.items()}
+        self.extra = tuple(extra)
         self._episodes: dict[str, list[float]] = {}
         rows: list[dict[str, str]] = []
         if append and self.path.exists() and self.path.stat().st_size > 0:
             header, rows = self._read()
-            found = [c for c in header if c not in RUN_COLUMNS and c not in TIMING_COLUMNS]
+            fixed = (*RUN_COLUMNS, *TIMING_COLUMNS, *self.extra)
+            found = [c for c in header if c not in fixed]
             self.metrics = {pinned.get(c, _metric_key(c)): c for c in found} | self.metrics
             if header == self.columns:
                 return
@@ -55,7 +66,7 @@ class ProgressLog:
     @property
     def columns(self) -> tuple[str, ...]:
         """The header, in order."""
-        return progress_columns(self.metrics.values())
+        return progress_columns(self.metrics.values(), self.extra)
 
     def record(self, log: Mapping[str, Any]) -> None:
         """Keep the metrics of the episodes that ended in one env step (``extras["log"]``:
@@ -74,7 +85,7 @@ class ProgressLog:
             self._rewrite(self._read()[1])
         means = {column: _mean(self._episodes.get(key, [])) for key, column in self.metrics.items()}
         self._episodes.clear()
-        merged = {**values, **means}
+        merged = {**dict.fromkeys(self.extra, math.nan), **values, **means}
         row = {column: merged[column] for column in self.columns}
         with self.path.open("a", newline="") as handle:
             csv.writer(handle).writerow(row.values())

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from chronogym.validation import check_bool
+from chronogym.validation import check_bool, check_int
 
 ENV_ID = "chronogym/Go1Velocity-v0"
 TERRAINS = ("rigid", "soil")
@@ -22,20 +22,30 @@ ENV_IDS: dict[str, str] = {
 #: Terrains of the Go1 task per engine.
 ENGINE_TERRAINS: dict[str, tuple[str, ...]] = {"mujoco": TERRAINS, "chrono": ("rigid", "scm")}
 
+#: Task settings that shape what training sees (commands, randomization, initial states),
+#: left out of the evaluation envs, which run the task as ``chronogym play`` does.
+TRAINING_DISTRIBUTION = (
+    "commands",
+    "randomization",
+    "reset_joint_noise",
+    "reset_joint_scale",
+    "reset_base_velocity",
+)
 
 #: PPO settings of the documented Go1 run, on top of :func:`ppo_train_config`'s legged_gym
 #: defaults. Few envs (32 on a laptop instead of 4096 on a GPU) make each minibatch small and
 #: noisy: the default 32 envs x 48 steps keep the batch at ~1.5k samples, a smaller initial
 #: action noise keeps the servos from shaking the robot, and a fixed learning rate replaces the
-#: adaptive schedule, which drove the rate to its 1e-5 floor within the first iteration
-#: (``docs/performance/rl.md``, "Go1 training"). With ``policy_lag=1`` lower the entropy bonus
-#: (0.001 and a learning rate of 2e-4 walked sooner there; "Go1 training with the overlapped
-#: update").
+#: adaptive schedule, which drove the rate to its 1e-5 floor within the first iteration. The
+#: rate (3e-4) and the entropy bonus (0.001) are MuJoCo Playground's for the Go1 joystick:
+#: against 1e-4 and 0.01 they made every seed walk within 1.5 M env steps
+#: (``docs/performance/rl.md``, "time_to_walk.py"). A checkpoint every 100 iterations is
+#: scored for ``best.pt``.
 QUADRUPED_PPO: dict[str, Any] = {
     "num_steps_per_env": 48,
-    "save_interval": 200,
+    "save_interval": 100,
     "actor": {"distribution_cfg": {"init_std": 0.5}},
-    "algorithm": {"schedule": "fixed", "learning_rate": 1e-4},
+    "algorithm": {"schedule": "fixed", "learning_rate": 3e-4, "entropy_coef": 0.001},
 }
 
 
@@ -137,6 +147,7 @@ def train_quadruped(
     update_threads: int | None = None,
     engine: str = "mujoco",
     driver_worker: bool = False,
+    eval_episodes: int = 2,
 ) -> Any:
     """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
 
@@ -149,7 +160,13 @@ def train_quadruped(
     ``{"dt": 0.005, "k": 4}``). ``engine="chrono"`` trains the same task in Project Chrono
     (``chronogym/ChronoGo1Velocity-v0``; a MuJoCo checkpoint resumes there unchanged).
     ``driver_worker`` (Ray only): the training process steps one worker's envs itself
-    (``RayVectorEnv(driver_worker=True)``). Returns :class:`~chronogym.rl.TrainResult`.
+    (``RayVectorEnv(driver_worker=True)``).
+
+    ``eval_episodes``: at every save point the checkpoint is scored on the walking criterion
+    of ``chronogym play`` (:class:`~chronogym.rl.evaluate.WalkingCriterion`'s commands, this
+    many episodes each, in envs of the training process) and the best so far is kept as
+    ``best.pt`` (``best.json`` says why); 0 evaluates nothing. Returns
+    :class:`~chronogym.rl.TrainResult`.
     """
     from chronogym.rl.config import FINETUNE_PPO
     from chronogym.rl.overlap import check_policy_lag
@@ -161,6 +178,7 @@ def train_quadruped(
     check_policy_lag(policy_lag)
     check_engine(engine, terrain)
     check_bool("driver_worker", driver_worker)
+    check_int("eval_episodes", eval_episodes, low=0)
     if driver_worker and backend != "ray":
         raise ValueError(f"driver_worker=True with backend={backend!r}: expected backend='ray'")
     if resume is not None and not Path(resume).is_file():
@@ -181,7 +199,10 @@ def train_quadruped(
         **({"driver_worker": True} if driver_worker else {}),
     )
     env = RslRlVecEnv(vec, seed=seed)
+    evaluator = None
     try:
+        if eval_episodes:
+            evaluator = walking_evaluator(engine, terrain, task_kwargs, eval_episodes)
         return train(
             env,
             out,
@@ -194,9 +215,28 @@ def train_quadruped(
             seed=seed,
             policy_lag=policy_lag,
             update_threads=update_threads,
+            evaluator=evaluator,
         )
     finally:
         env.close()
+        if evaluator is not None:
+            evaluator.close()
+
+
+def walking_evaluator(
+    engine: str, terrain: str, task_kwargs: dict[str, Any] | None, episodes: int
+) -> Any:
+    """A :class:`~chronogym.rl.evaluate.WalkingEvaluator` on the training's task as
+    ``chronogym play`` makes it (the ``TRAINING_DISTRIBUTION`` settings left out): the
+    standard commands, ``episodes`` episodes each (seeds 0, 1, ...)."""
+    import gymnasium as gym
+
+    from chronogym.rl.evaluate import WalkingCriterion, WalkingEvaluator
+
+    env_id = ENV_IDS[engine]
+    physics = {k: v for k, v in (task_kwargs or {}).items() if k not in TRAINING_DISTRIBUTION}
+    kwargs = env_kwargs_for(terrain, physics, engine)
+    return WalkingEvaluator(lambda: gym.make(env_id, **kwargs), WalkingCriterion(episodes=episodes))
 
 
 def default_update_threads() -> int:
@@ -223,11 +263,15 @@ def play_quadruped(
     video_seconds: float = 5.0,
     engine: str = "mujoco",
     task_kwargs: dict[str, Any] | None = None,
+    randomization: Any = None,
 ) -> list[dict[str, Any]]:
     """Roll the checkpoint's policy out for each command; return the summary rows.
 
     ``engine="chrono"`` plays it in Project Chrono (sim-to-sim for a MuJoCo-trained policy);
     the video then shows the Chrono robot's pose drawn with the MuJoCo model.
+
+    ``randomization``: a :class:`~chronogym.tasks.quadruped.config.DomainRandomization` of
+    the episodes (pushes, friction, trunk mass), to see how robust the policy is.
 
     With ``video`` the first ``video_seconds`` of the first episode of every command are
     rendered offscreen (needs an OpenGL backend: EGL, or OSMesa with ``MUJOCO_GL=osmesa``)
@@ -247,7 +291,10 @@ def play_quadruped(
         env_id,
         render_mode=render_mode,
         max_episode_steps=max_episode_steps,
-        **env_kwargs_for(terrain, task_kwargs, engine),
+        **{
+            **env_kwargs_for(terrain, task_kwargs, engine),
+            **({"randomization": randomization} if randomization is not None else {}),
+        },
     )
     try:
         policy = load_policy(checkpoint, env.observation_space.shape[0], env.action_space.shape[0])

@@ -23,6 +23,7 @@ from typing import Any
 
 from rsl_rl.runners import OnPolicyRunner
 
+from chronogym.rl.best import BestCheckpoint, Evaluator
 from chronogym.rl.checkpoint import read_checkpoint
 from chronogym.rl.collection import Iteration, Rollouts, make_collection
 from chronogym.rl.config import PROGRESS_METRICS
@@ -36,7 +37,8 @@ class TrainResult:
 
     ``iterations_done`` and ``env_steps`` count the whole run, including the
     iterations before a resumed checkpoint; ``wall_time`` is this call's seconds.
-    ``last_row`` is the last row of ``progress.csv``.
+    ``last_row`` is the last row of ``progress.csv``. ``best``: which checkpoint is
+    ``best.pt`` and why (empty when training evaluated no checkpoint).
     """
 
     iterations_done: int
@@ -45,6 +47,7 @@ class TrainResult:
     checkpoint: Path
     csv_path: Path
     last_row: dict[str, float]
+    best: str = ""
 
 
 @dataclass(frozen=True)
@@ -105,6 +108,7 @@ class Runner:
         torch_threads: int,
         update_threads: int,
         verbose: bool = False,
+        evaluator: Evaluator | None = None,
     ) -> None:
         self.env = env
         self.out = out
@@ -122,6 +126,8 @@ class Runner:
         self.start_it = 0
         self.env_steps = 0
         self.resumed = False
+        self.evaluator = evaluator
+        self.best: BestCheckpoint | None = None
 
     def resume(self, checkpoint: str | Path) -> None:
         """Continue ``checkpoint``: its models, optimizer, iteration and env-step counts. A
@@ -145,8 +151,13 @@ class Runner:
         end; show each ``progress.csv`` row on ``bar``."""
         with _quiet(self.quiet):
             self.logger.init_logging_writer()
+        if self.evaluator is not None:
+            self.best = BestCheckpoint(self.out, self.evaluator, resumed=self.resumed)
         self.progress = ProgressLog(
-            self.out / "progress.csv", PROGRESS_METRICS, append=self.resumed
+            self.out / "progress.csv",
+            PROGRESS_METRICS,
+            append=self.resumed,
+            extra=self.best.columns if self.best is not None else (),
         )
         t0 = time.perf_counter()
         rollouts = Rollouts(self.env, self.rsl.device, self.steps_per_env, self._on_step)
@@ -164,20 +175,30 @@ class Runner:
             collection.start(it)
             while True:
                 step = collection.iterate(it)
+                self.env_steps += self.steps_per_env * self.env.num_envs
                 elapsed = time.perf_counter() - t0
-                row = self._record(it, step, elapsed, budget)
+                last = budget.exhausted(it + 1 - self.start_it, elapsed)
+                evaluation: dict[str, float] = {}
+                if last or (it + 1) % self.save_interval == 0:
+                    checkpoint = self.save(it)
+                    evaluation = self._evaluate(it, checkpoint)
+                row = self._record(it, step, elapsed, budget, evaluation)
                 bar.update(row)
-                if budget.exhausted(it + 1 - self.start_it, elapsed):
+                if last:
                     break
-                if (it + 1) % self.save_interval == 0:
-                    self.save(it)
                 it += 1
-            checkpoint = self.save(it)
         finally:
             bar.close()
             self._stop_logger()
         wall = time.perf_counter() - t0
-        return TrainResult(it + 1, self.env_steps, wall, checkpoint, self.progress.path, row)
+        best = self.best.summary() if self.best is not None else ""
+        return TrainResult(it + 1, self.env_steps, wall, checkpoint, self.progress.path, row, best)
+
+    def _evaluate(self, it: int, checkpoint: Path) -> dict[str, float]:
+        """Score ``checkpoint`` for ``best.pt`` (no evaluator: nothing); its CSV values."""
+        if self.best is None:
+            return {}
+        return self.best.consider(it, self.env_steps, checkpoint)
 
     def _on_step(self, actor: Any, rewards: Any, dones: Any, extras: dict[str, Any]) -> None:
         """Episode bookkeeping of one env step: RSL-RL's logger and the progress log."""
@@ -185,9 +206,16 @@ class Runner:
         self.logger.process_env_step(rewards, dones, extras, intrinsic)
         self.progress.record(extras.get("log", {}))
 
-    def _record(self, it: int, step: Iteration, elapsed: float, budget: Budget) -> dict[str, float]:
-        """Count the iteration's env steps, log it with RSL-RL's logger, write its row."""
-        self.env_steps += self.steps_per_env * self.env.num_envs
+    def _record(
+        self,
+        it: int,
+        step: Iteration,
+        elapsed: float,
+        budget: Budget,
+        evaluation: dict[str, float],
+    ) -> dict[str, float]:
+        """Log the iteration with RSL-RL's logger, write its row (with the ``evaluation`` of
+        its checkpoint, if any)."""
         self.rsl.current_learning_iteration = it
         rnd = self.alg.rnd
         total_it = it + 1 if budget.iterations is None else self.start_it + budget.iterations
@@ -213,6 +241,7 @@ class Runner:
                 "collect_s": step.collect_s,
                 "learn_s": step.learn_s,
                 "policy_lag": step.policy_lag,
+                **evaluation,
             }
         )
 

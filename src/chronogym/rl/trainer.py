@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from chronogym.rl.best import Evaluator
 from chronogym.rl.checkpoint import load_policy
 from chronogym.rl.config import PROGRESS_METRICS, ppo_train_config
 from chronogym.rl.overlap import check_policy_lag
@@ -62,6 +63,7 @@ def train(
     update_threads: int | None = None,
     log: Callable[[str], Any] = print,
     verbose: bool = False,
+    evaluator: Evaluator | None = None,
 ) -> TrainResult:
     """Train a PPO policy on a vector env (or an :class:`RslRlVecEnv`); return what was done.
 
@@ -90,6 +92,11 @@ def train(
     rollout and runs on ``torch_threads``.
 
     ``verbose``: let RSL-RL print its model summary and per-iteration console block.
+
+    ``evaluator``: scores every saved checkpoint (e.g. a
+    :class:`~chronogym.rl.evaluate.WalkingEvaluator`); the best so far is copied to
+    ``best.pt``, why is written to ``best.json`` (:mod:`chronogym.rl.best`), and each score
+    and the seconds it took fill their own ``progress.csv`` columns at the save points.
     """
     budget = Budget.of(iterations, minutes)
     check_policy_lag(policy_lag)
@@ -113,6 +120,7 @@ def train(
         torch_threads=torch_threads,
         update_threads=update_threads,
         verbose=verbose,
+        evaluator=evaluator,
     )
     if resume is not None:
         runner.resume(resume)
@@ -123,4 +131,6 @@ def train(
             f"({result.env_steps} env steps in total) in {result.wall_time:.1f} s; "
             f"checkpoint {result.checkpoint}"
         )
+        if result.best:
+            log(result.best)
     return result

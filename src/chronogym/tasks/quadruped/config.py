@@ -60,18 +60,44 @@ class CommandRanges:
     ``resample_s``: draw a new command every this many seconds of an episode (as legged_gym
     does), so an episode holds several speed changes; ``None`` keeps one command per episode.
     A command fixed by ``reset(options={"command": ...})`` is never resampled.
+
+    Shaping of the drawn command (all off by default): with probability ``single_axis_share``
+    only one of its three components (chosen uniformly) is kept; with probability
+    ``standing_share`` it is all zero (Isaac Lab's standing envs); a planar speed below
+    ``zero_below`` m/s is set to zero (legged_gym uses 0.2).
     """
 
     vx: tuple[float, float] = (-0.5, 1.0)  # m/s, forward
     vy: tuple[float, float] = (-0.3, 0.3)  # m/s, left
     yaw_rate: tuple[float, float] = (-0.5, 0.5)  # rad/s
     resample_s: float | None = None
+    single_axis_share: float = 0.0
+    standing_share: float = 0.0
+    zero_below: float = 0.0  # m/s
 
     def __post_init__(self) -> None:
         for name in ("vx", "vy", "yaw_rate"):
             _check_range(name, getattr(self, name))
         if self.resample_s is not None:
             check_positive("resample_s", self.resample_s, expected="None or seconds > 0")
+        for name in ("single_axis_share", "standing_share"):
+            value = getattr(self, name)
+            if not (_is_number(value) and 0 <= value <= 1):
+                raise ValueError(f"{name}={value!r}: expected a probability in [0, 1]")
+        if not (_is_number(self.zero_below) and self.zero_below >= 0):
+            raise ValueError(f"zero_below={self.zero_below!r}: expected a speed >= 0 in m/s")
+
+    def shape(self, command: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Apply the single-axis, standing and dead-zone rules to a drawn ``command`` (in
+        place; returns it). Draws from ``rng`` only for the rules that are on."""
+        if self.single_axis_share > 0 and rng.random() < self.single_axis_share:
+            keep = int(rng.integers(3))
+            command[[i for i in range(3) if i != keep]] = 0.0
+        if self.standing_share > 0 and rng.random() < self.standing_share:
+            command[:] = 0.0
+        if self.zero_below > 0 and math.hypot(command[0], command[1]) < self.zero_below:
+            command[:2] = 0.0
+        return command
 
 
 @dataclass(frozen=True)
@@ -178,6 +204,12 @@ class Go1TaskConfig:
     air_time_threshold: float = 0.25
     #: Joint angles start uniform within +- this of the home pose [rad], in [0, 0.5].
     reset_joint_noise: float = 0.1
+    #: Joint angles start at the home pose times a factor drawn per joint from this range
+    #: (legged_gym: (0.5, 1.5)), before ``reset_joint_noise``; ``None``: off.
+    reset_joint_scale: tuple[float, float] | None = None
+    #: The base starts with a horizontal velocity uniform within +- this per axis [m/s]
+    #: (legged_gym: 0.5).
+    reset_base_velocity: float = 0.0
     #: Clip the step reward at 0 from below (legged_gym's ``only_positive_rewards``).
     only_positive_rewards: bool = True
     #: Servo stiffness [N m/rad]; ``None``: the model's (100).
@@ -210,6 +242,17 @@ class Go1TaskConfig:
         noise = self.reset_joint_noise
         if not (_is_number(noise) and 0 <= noise <= 0.5):
             raise ValueError(f"reset_joint_noise={noise!r}: expected in [0, 0.5] rad")
+        if self.reset_joint_scale is not None:
+            _check_range("reset_joint_scale", self.reset_joint_scale)
+            low, high = self.reset_joint_scale
+            if not (low >= 0 and high <= 2):
+                raise ValueError(
+                    f"reset_joint_scale={self.reset_joint_scale!r}: expected None or "
+                    "(low, high) within [0, 2]"
+                )
+        velocity = self.reset_base_velocity
+        if not (_is_number(velocity) and 0 <= velocity <= 2):
+            raise ValueError(f"reset_base_velocity={velocity!r}: expected in [0, 2] m/s")
         if not isinstance(self.only_positive_rewards, (bool, np.bool_)):
             raise ValueError(
                 f"only_positive_rewards={self.only_positive_rewards!r}: expected True or False"

@@ -216,11 +216,9 @@ class Go1VelocityBase(Task):
         options = options or {}
         self._apply_randomization(rng)
         yaw = rng.uniform(-math.pi, math.pi)
-        noise = self.config.reset_joint_noise
-        joints = (
-            DEFAULT_JOINT_POS + rng.uniform(-noise, noise, size=ACTION_DIM) if noise > 0 else None
-        )
-        self._reset_pose(yaw, joints)
+        self._reset_pose(yaw, self._initial_joints(rng))
+        if self.config.reset_base_velocity > 0:
+            self._kick_base(rng.uniform(-1.0, 1.0, size=2) * self.config.reset_base_velocity)
         fixed = options.get("command")
         self.command = self._draw_command(rng, fixed)
         self._next_command = None if fixed is not None else self._resample_interval_steps()
@@ -238,6 +236,19 @@ class Go1VelocityBase(Task):
         self._next_push = self._push_interval_steps()
         self._feet_xy_before = self._feet_xy()
 
+    def _initial_joints(self, rng: np.random.Generator) -> np.ndarray | None:
+        """Joint angles to start from (``None``: the home pose), per the reset settings."""
+        config = self.config
+        if config.reset_joint_scale is None and config.reset_joint_noise <= 0:
+            return None
+        joints = DEFAULT_JOINT_POS.copy()
+        if config.reset_joint_scale is not None:
+            joints *= rng.uniform(*config.reset_joint_scale, size=ACTION_DIM)
+        noise = config.reset_joint_noise
+        if noise > 0:
+            joints += rng.uniform(-noise, noise, size=ACTION_DIM)
+        return joints
+
     def _draw_command(self, rng: np.random.Generator, fixed: Any) -> np.ndarray:
         if fixed is not None:
             command = np.asarray(fixed, dtype=np.float64)
@@ -247,9 +258,10 @@ class Go1VelocityBase(Task):
                 )
             return command.copy()
         ranges = self.config.commands
-        return np.array(
+        command = np.array(
             [rng.uniform(*ranges.vx), rng.uniform(*ranges.vy), rng.uniform(*ranges.yaw_rate)]
         )
+        return ranges.shape(command, rng)
 
     def _apply_randomization(self, rng: np.random.Generator) -> None:
         dr = self.config.randomization

@@ -1,0 +1,121 @@
+"""Robustness of a Go1 policy: survival and tracking under pushes and friction randomization.
+
+Plays one checkpoint, as ``chronogym play quadruped --push`` / ``--friction LO HI`` do, on the
+standard commands (5 episodes each, the walking criterion's seeds) under each condition of
+:data:`CONDITIONS`: nominal, base pushes of growing size (the task's ``DomainRandomization``:
+a random horizontal velocity kick of up to ``v`` m/s per axis every ``interval`` s; legged_gym
+trains with 1 m/s every 15 s) and foot-ground friction drawn per episode from a range.
+Prints a table and writes ``robustness.json`` (every command's row per condition) and
+``robustness.png``.
+
+    python benchmarks/rl/robustness.py runs/time_to_walk/serial-32-0-48-s0/best.pt
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
+
+OUT = RESULTS / "robustness"
+
+#: name -> (push velocity m/s or None, push interval s, friction range or None)
+CONDITIONS: dict[str, tuple[float | None, float, tuple[float, float] | None]] = {
+    "nominal": (None, 0.0, None),
+    "push 0.5 m/s / 5 s": (0.5, 5.0, None),
+    "push 1.0 m/s / 15 s": (1.0, 15.0, None),
+    "push 1.0 m/s / 5 s": (1.0, 5.0, None),
+    "push 1.5 m/s / 5 s": (1.5, 5.0, None),
+    "friction 0.2-0.4": (None, 0.0, (0.2, 0.4)),
+    "friction 0.4-0.8": (None, 0.0, (0.4, 0.8)),
+    "friction 0.5-1.25": (None, 0.0, (0.5, 1.25)),
+    "friction 1.0-2.0": (None, 0.0, (1.0, 2.0)),
+}
+
+
+def randomization(push: float | None, interval: float, friction: Any) -> Any:
+    """The ``DomainRandomization`` of one condition (None: nominal)."""
+    from chronogym.tasks.quadruped.config import DomainRandomization
+
+    if push is None and friction is None:
+        return None
+    return DomainRandomization(
+        friction=friction,
+        added_base_mass=None,
+        push_interval_s=interval if push is not None else None,
+        push_velocity=push or 0.0,
+    )
+
+
+def main(argv: list[str] | None = None) -> None:
+    from chronogym.rl.evaluate import WalkingCriterion
+    from chronogym.rl.quadruped import play_quadruped
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("checkpoint", type=Path)
+    parser.add_argument("--episodes", type=int, default=5, help="per command and condition")
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args(argv)
+    if not args.checkpoint.is_file():
+        parser.error(f"checkpoint {args.checkpoint}: no such file")
+    if args.episodes < 1:
+        parser.error(f"--episodes={args.episodes}: expected an integer >= 1")
+    criterion = WalkingCriterion(episodes=args.episodes)
+    results = []
+    for name, (push, interval, friction) in CONDITIONS.items():
+        rows = play_quadruped(
+            args.checkpoint,
+            episodes=args.episodes,
+            progress=False,
+            randomization=randomization(push, interval, friction),
+        )
+        results.append({
+            "condition": name, "push_velocity": push, "push_interval_s": interval or None,
+            "friction": friction,
+            "survival": min(r["survival"] for r in rows),
+            "mean_survival": sum(r["survival"] for r in rows) / len(rows),
+            "worst_mse": max(max(r["x_vel_mse"], r["y_vel_mse"]) for r in rows),
+            "commands_passed": sum(criterion.passes(r) for r in rows),
+            "commands": [{**r, "command": list(r["command"])} for r in rows],
+        })  # fmt: skip
+        print(f"  {name}: done", flush=True)
+    columns = [
+        Column("condition", 22, align="<", key="condition"),
+        Column("episodes survived", 17, "{:.0%}", key="mean_survival"),
+        Column("worst command survival", 22, "{:.0%}", key="survival"),
+        Column("worst x/y MSE", 13, "{:.4f}", key="worst_mse"),
+        Column("commands passing", 16, key="commands_passed"),
+    ]
+    print(table(columns, results, rule=True))
+    plot(results, args.out / "robustness.png")
+    write_json(args.out / "robustness.json", {
+        **header("robustness", "torch", "rsl-rl-lib"), "settings": settings(args),
+        "commands": len(criterion.commands), "conditions": results,
+    })  # fmt: skip
+
+
+def plot(results: list[dict[str, Any]], path: Path) -> None:
+    fig, (left, right) = pyplot().subplots(1, 2, figsize=(12, 4.2))
+    names = [r["condition"] for r in results]
+    ys = range(len(names))
+    left.barh(ys, [100 * r["mean_survival"] for r in results], color="tab:blue")
+    left.set_xlabel("episodes survived (%)")
+    right.barh(ys, [r["worst_mse"] for r in results], color="tab:orange")
+    right.axvline(0.01, color="k", lw=0.8, ls="--")
+    right.set_xscale("log")
+    right.set_xlabel("worst command's x/y velocity MSE (m/s)²")
+    for axis in (left, right):
+        axis.set_yticks(list(ys), names)
+        axis.invert_yaxis()
+        axis.grid(alpha=0.3, axis="x")
+    right.set_yticklabels([])
+    fig.suptitle("Go1 policy under pushes and friction (standard commands, 5 episodes each)")
+    save_figure(fig, path)
+
+
+if __name__ == "__main__":
+    main()

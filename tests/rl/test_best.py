@@ -1,0 +1,195 @@
+"""best.pt: every saved checkpoint is scored, the best by the walking criterion is kept."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("rsl_rl")
+
+import chronogym  # noqa: F401
+from chronogym.rl.best import BestCheckpoint
+from chronogym.rl.evaluate import (
+    WalkingCriterion,
+    WalkingEvaluator,
+    WalkingScore,
+    run_episode,
+    run_episodes_together,
+    score_walking,
+)
+from chronogym.rl.progress import TIMING_COLUMNS
+from chronogym.rl.quadruped import ENV_ID, quadruped_train_config, train_quadruped
+
+SHORT = {"max_episode_steps": 40}  # short episodes keep the evaluations cheap
+
+
+@dataclass
+class ScriptedScore:
+    """A score chosen by the test for each checkpoint name."""
+
+    passed: int
+    worst: float
+
+    def key(self) -> tuple[float, ...]:
+        return WalkingScore(self.passed, 6, self.worst).key()
+
+    def describe(self) -> str:
+        return WalkingScore(self.passed, 6, self.worst).describe()
+
+    def columns(self) -> dict[str, float]:
+        return {"passed": self.passed}
+
+
+class ScriptedEvaluator:
+    columns = ("passed",)
+
+    def __init__(self, scores: dict[str, ScriptedScore]) -> None:
+        self.scores = scores
+
+    def __call__(self, checkpoint):
+        return self.scores[checkpoint.name]
+
+
+def write_checkpoints(folder, names):
+    for name in names:
+        (folder / name).write_bytes(name.encode())
+
+
+def test_the_best_is_more_commands_passed_then_a_smaller_worst_mse(tmp_path):
+    scores = {
+        "model_0.pt": ScriptedScore(0, 0.2),
+        "model_1.pt": ScriptedScore(3, 0.05),
+        "model_2.pt": ScriptedScore(2, 0.001),  # fewer commands pass: not better
+        "model_3.pt": ScriptedScore(3, 0.02),  # same commands, smaller MSE: better
+        "model_4.pt": ScriptedScore(3, 0.02),  # a tie keeps the earlier one
+    }
+    write_checkpoints(tmp_path, scores)
+    best = BestCheckpoint(tmp_path, ScriptedEvaluator(scores))
+    for it, name in enumerate(scores):
+        values = best.consider(it, 100 * (it + 1), tmp_path / name)
+        assert values["passed"] == scores[name].passed and values["eval_s"] >= 0
+    assert (tmp_path / "best.pt").read_bytes() == b"model_3.pt"
+    record = json.loads((tmp_path / "best.json").read_text())
+    assert record["iteration"] == 3 and record["env_steps"] == 400
+    assert record["source"] == "model_3.pt"
+    assert "3/6 commands pass, worst MSE 0.0200" in best.summary()
+
+
+def test_a_resumed_run_keeps_the_best_of_the_earlier_part(tmp_path):
+    scores = {"model_0.pt": ScriptedScore(4, 0.01), "model_1.pt": ScriptedScore(2, 0.01)}
+    write_checkpoints(tmp_path, scores)
+    BestCheckpoint(tmp_path, ScriptedEvaluator(scores)).consider(0, 10, tmp_path / "model_0.pt")
+    resumed = BestCheckpoint(tmp_path, ScriptedEvaluator(scores), resumed=True)
+    resumed.consider(1, 20, tmp_path / "model_1.pt")
+    assert (tmp_path / "best.pt").read_bytes() == b"model_0.pt"
+    assert json.loads((tmp_path / "best.json").read_text())["iteration"] == 0
+
+
+def test_score_counts_the_commands_passed_in_order():
+    criterion = WalkingCriterion(commands=((0.5, 0, 0), (1.0, 0, 0), (0, 0, 0)))
+
+    def row(survival, x, y=0.0):
+        return {"survival": survival, "x_vel_mse": x, "y_vel_mse": y}
+
+    score = score_walking([row(1.0, 0.005), row(0.8, 0.002), row(1.0, 0.03)], criterion)
+    assert (score.commands_passed, score.worst_mse, score.walks) == (1, 0.03, False)
+    assert score_walking([row(1.0, 0.001)] * 3, criterion).walks
+
+
+def test_episodes_in_step_give_the_results_of_one_at_a_time():
+    policy = ZeroPolicy()
+    jobs = [((0.5, 0.0, 0.0), 0), ((0.0, 0.2, 0.0), 1), ((0.0, 0.0, 0.0), 2)]
+    envs = [gym.make(ENV_ID, **SHORT) for _ in jobs]
+    single = gym.make(ENV_ID, **SHORT)
+    try:
+        together = run_episodes_together(envs, policy, jobs)
+        alone = [run_episode(single, policy, command, seed) for command, seed in jobs]
+    finally:
+        for env in [*envs, single]:
+            env.close()
+    assert together == alone
+
+
+class ZeroPolicy:
+    """The home pose: the Go1 stands."""
+
+    def __call__(self, obs):
+        obs = np.asarray(obs)
+        return np.zeros((*obs.shape[:-1], 12), dtype=np.float32)
+
+
+def train_tiny(out, seed=0):
+    cfg = quadruped_train_config(num_steps_per_env=8, save_interval=2)
+    return train_quadruped(
+        out, num_envs=4, backend="serial", iterations=6, seed=seed, train_cfg=cfg,
+        task_kwargs=SHORT, eval_episodes=1, progress=False, update_threads=1,
+    )  # fmt: skip
+
+
+def read_rows(path):
+    with path.open(newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_training_keeps_the_checkpoint_the_criterion_ranks_first(tmp_path):
+    result = train_tiny(tmp_path / "run")
+    run = tmp_path / "run"
+    rows = read_rows(run / "progress.csv")
+    evaluated = [r for r in rows if r["eval_commands_passed"] != "nan"]
+    assert [int(r["iteration"]) for r in evaluated] == [1, 3, 5]  # the save points
+    assert all(float(r["eval_s"]) > 0 for r in evaluated)
+    assert all(math.isnan(float(r["eval_worst_mse"])) for r in rows if r not in evaluated)
+
+    def key(r):
+        return (int(r["eval_commands_passed"]), -float(r["eval_worst_mse"]))
+
+    winner = max(evaluated, key=key)  # max keeps the first of equals, as best.pt does
+    record = json.loads((run / "best.json").read_text())
+    assert record["iteration"] == int(winner["iteration"])
+    assert record["env_steps"] == int(winner["env_steps"])
+    source = run / f"model_{winner['iteration']}.pt"
+    assert (run / "best.pt").read_bytes() == source.read_bytes()
+    assert result.best.startswith(f"best checkpoint {run / 'best.pt'} = {source.name}")
+
+    # the evaluator sees what `chronogym play` sees: rescoring best.pt gives its row again
+    evaluator = WalkingEvaluator(lambda: gym.make(ENV_ID, **SHORT), WalkingCriterion(episodes=1))
+    try:
+        again = evaluator(run / "best.pt")
+    finally:
+        evaluator.close()
+    assert again.commands_passed == int(winner["eval_commands_passed"])
+    assert again.worst_mse == pytest.approx(float(winner["eval_worst_mse"]), rel=1e-9)
+
+
+def test_the_same_seed_gives_the_same_rows_evaluations_included(tmp_path):
+    train_tiny(tmp_path / "a", seed=3)
+    train_tiny(tmp_path / "b", seed=3)
+    timing = {"wall_time", "eval_s", *TIMING_COLUMNS}
+
+    def untimed(run):
+        return [{k: v for k, v in r.items() if k not in timing} for r in read_rows(run)]
+
+    a, b = untimed(tmp_path / "a" / "progress.csv"), untimed(tmp_path / "b" / "progress.csv")
+    assert a == b and "eval_worst_mse" in a[0]
+
+
+def test_eval_episodes_zero_keeps_no_best_and_the_plain_header(tmp_path):
+    cfg = quadruped_train_config(num_steps_per_env=4, save_interval=1)
+    result = train_quadruped(
+        tmp_path, num_envs=2, backend="serial", iterations=1, train_cfg=cfg,
+        task_kwargs=SHORT, eval_episodes=0, progress=False, update_threads=1,
+    )  # fmt: skip
+    assert result.best == "" and not (tmp_path / "best.pt").exists()
+    assert "eval_s" not in read_rows(tmp_path / "progress.csv")[0]
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True, "2"])
+def test_eval_episodes_must_be_a_count(tmp_path, bad):
+    with pytest.raises(ValueError, match="eval_episodes"):
+        train_quadruped(tmp_path, iterations=1, eval_episodes=bad)
