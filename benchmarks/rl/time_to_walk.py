@@ -50,6 +50,8 @@ from common import RESULTS, header, pyplot, save_figure, settings, write_json
 from train_throughput import parse_config
 
 OUT = RESULTS / "time_to_walk"
+#: Every seed of the default should walk within this many env steps (median <= 1.2 M).
+GOAL_ENV_STEPS = 1.5e6
 RUNS = Path("runs") / "time_to_walk"
 
 
@@ -65,6 +67,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "ppo_before": {"ppo": {"algorithm": {"learning_rate": 1e-4, "entropy_coef": 0.01}}},
     "lr1e-4": {"ppo": {"algorithm": {"learning_rate": 1e-4}}},
     "ent1e-2": {"ppo": {"algorithm": {"entropy_coef": 0.01}}},
+    "critic": {"task": {"privileged_critic": True}},
+    "mb8": {"ppo": {"algorithm": {"num_mini_batches": 8}}},
     "init_noise": {"task": {"reset_joint_scale": (0.5, 1.5), "reset_base_velocity": 0.5}},
     "vx1.5": {"task": {"commands": {"vx": (-0.5, 1.5)}}},
     "zero_cmd": {"task": {"commands": {"zero_below": 0.2, "standing_share": 0.1}}},
@@ -187,31 +191,55 @@ def evaluate_run(run: Path, criterion: Any, config: str) -> tuple[list[dict[str,
     return rows, ends
 
 
-def plot(rows: list[dict[str, Any]], criterion: Any, budget: float, path: Path) -> None:
-    fig, (left, right) = pyplot().subplots(1, 2, figsize=(12, 4.4))
-    configs = list(dict.fromkeys(r["config"] for r in rows))
+def plot(
+    rows: list[dict[str, Any]], summary: list[dict[str, Any]], criterion: Any, path: Path
+) -> None:
+    """Commands passed and worst MSE against env steps (a line per run; colour: configuration,
+    style: seed), and each configuration's env steps to walk (a dot per seed; an open triangle
+    at the last checkpoint checked for a run that did not walk)."""
+    fig, (left, middle, right) = pyplot().subplots(
+        1, 3, figsize=(17, 4.6), gridspec_kw={"width_ratios": [1, 1, 1.1]}
+    )
+    configs = list(dict.fromkeys(s["config"] for s in summary))
     colors = pyplot().get_cmap("tab10")
-    styles = ("-", "--", ":", "-.", (0, (6, 2, 1, 2, 1, 2)))  # colour: config; style: seed
+    styles = ("-", "--", ":", "-.", (0, (6, 2, 1, 2, 1, 2)))
     for run in dict.fromkeys(r["run"] for r in rows):
         mine = [r for r in rows if r["run"] == run]
         steps = [r["env_steps"] / 1e6 for r in mine]
         color = colors(configs.index(mine[0]["config"]) % 10)
         style = styles[int(mine[0]["seed"]) % len(styles)]
-        label = f"{mine[0]['config']} s{mine[0]['seed']}"
-        for axis, key in ((left, "commands_passed"), (right, "worst_mse")):
-            axis.plot(steps, [r[key] for r in mine], marker=".", color=color, ls=style,
-                      label=label)  # fmt: skip
+        for axis, key in ((left, "commands_passed"), (middle, "worst_mse")):
+            axis.plot(steps, [r[key] for r in mine], marker=".", ms=3, lw=1, color=color, ls=style)
     left.set_ylabel(f"commands passed in order (of {len(criterion.commands)})")
-    right.set_ylabel("worst episode-mean x/y velocity MSE (m/s)²")
-    right.axhline(criterion.max_x_mse, color="k", lw=0.8, ls="--")
-    right.set_yscale("log")
-    for axis in (left, right):
-        axis.axvline(budget / 1e6, color="grey", lw=0.8, ls=":")
+    middle.set_ylabel("worst episode-mean x/y velocity MSE (m/s)²")
+    middle.axhline(criterion.max_x_mse, color="k", lw=0.8, ls="--")
+    middle.set_yscale("log")
+    for axis in (left, middle):
         axis.set_xlabel("env steps since training started (millions)")
         axis.grid(alpha=0.3)
-    left.legend(fontsize=7)
+    for y, config in enumerate(configs):
+        mine = [s for s in summary if s["config"] == config]
+        walked = [s["env_steps_to_walk"] / 1e6 for s in mine if s["env_steps_to_walk"]]
+        failed = [
+            (s.get("trained_env_steps") or 0) / 1e6 for s in mine if not s["env_steps_to_walk"]
+        ]
+        right.scatter(walked, [y] * len(walked), color=colors(y % 10), zorder=3)
+        right.scatter(failed, [y] * len(failed), marker=">", facecolors="none",
+                      edgecolors=colors(y % 10), zorder=3)  # fmt: skip
+    right.axvline(GOAL_ENV_STEPS / 1e6, color="k", lw=0.8, ls="--")
+    right.set_yticks(range(len(configs)), [f"{c} ({medians_label(summary, c)})" for c in configs])
+    right.invert_yaxis()
+    right.yaxis.tick_right()
+    right.set_xlabel("env steps to the first walking checkpoint (millions; > : not by then)")
+    right.grid(alpha=0.3, axis="x")
     fig.suptitle("Go1 time-to-walk: checkpoints checked in order until one walks")
     save_figure(fig, path)
+
+
+def medians_label(summary: list[dict[str, Any]], config: str) -> str:
+    """``"walked 4/5"`` for a configuration's runs."""
+    mine = [s for s in summary if s["config"] == config]
+    return f"walked {sum(bool(s['env_steps_to_walk']) for s in mine)}/{len(mine)}"
 
 
 def summarize_run(config: str, seed: int, rows: list[dict[str, Any]], ends: dict, run: Path):
@@ -306,7 +334,7 @@ def main(argv: list[str] | None = None) -> None:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["config"])
         writer.writeheader()
         writer.writerows(rows)
-    plot(rows, criterion, args.env_steps, args.out / "time_to_walk.png")
+    plot(rows, summary, criterion, args.out / "time_to_walk.png")
     ran = {c: merged_settings(args, c, earlier["settings"].get(c)) for c in args.configs if runs}
     record = {
         **header("time_to_walk", "torch", "rsl-rl-lib"),

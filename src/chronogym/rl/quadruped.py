@@ -22,9 +22,11 @@ ENV_IDS: dict[str, str] = {
 #: Terrains of the Go1 task per engine.
 ENGINE_TERRAINS: dict[str, tuple[str, ...]] = {"mujoco": TERRAINS, "chrono": ("rigid", "scm")}
 
-#: Task settings that shape what training sees (commands, randomization, initial states),
-#: left out of the evaluation envs, which run the task as ``chronogym play`` does.
+#: Task settings for training only (what it sees: commands, randomization, initial states;
+#: the critic's observation), left out of the evaluation envs, which run the task as
+#: ``chronogym play`` does.
 TRAINING_DISTRIBUTION = (
+    "privileged_critic",
     "commands",
     "randomization",
     "reset_joint_noise",

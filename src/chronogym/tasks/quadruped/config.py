@@ -212,6 +212,12 @@ class Go1TaskConfig:
     reset_base_velocity: float = 0.0
     #: Clip the step reward at 0 from below (legged_gym's ``only_positive_rewards``).
     only_positive_rewards: bool = True
+    #: Report ``info["critic_obs"]`` every step: the 45 observations, then the base's linear
+    #: velocity (body frame, x 2) and its height above ``base_height_target`` (x 10), what the
+    #: tracking and height rewards are computed from. RSL-RL's critic then trains on it (an
+    #: asymmetric actor-critic, as legged_gym's and MuJoCo Playground's); the policy's 45
+    #: observations do not change.
+    privileged_critic: bool = False
     #: Servo stiffness [N m/rad]; ``None``: the model's (100).
     kp: float | None = 35.0
     #: Servo damping [N m s/rad]; ``None``: the model's (2).
@@ -253,6 +259,10 @@ class Go1TaskConfig:
         velocity = self.reset_base_velocity
         if not (_is_number(velocity) and 0 <= velocity <= 2):
             raise ValueError(f"reset_base_velocity={velocity!r}: expected in [0, 2] m/s")
+        if not isinstance(self.privileged_critic, (bool, np.bool_)):
+            raise ValueError(
+                f"privileged_critic={self.privileged_critic!r}: expected True or False"
+            )
         if not isinstance(self.only_positive_rewards, (bool, np.bool_)):
             raise ValueError(
                 f"only_positive_rewards={self.only_positive_rewards!r}: expected True or False"

@@ -440,9 +440,10 @@ class Go1VelocityBase(Task):
         return self._fell
 
     def info(self) -> dict[str, Any]:
+        extra = {"critic_obs": self.critic_observation()} if self.config.privileged_critic else {}
         horizon = self.max_episode_steps
         if not (self._fell or (horizon is not None and self._steps >= horizon)):
-            return {}
+            return extra
         steps = max(self._steps, 1)
         sums = self._episode_sum
         log = {f"/reward/{name}": float(sums[i]) for i, name in self._active_terms}
@@ -450,4 +451,12 @@ class Go1VelocityBase(Task):
         log["/metrics/y_vel_mse"] = float(self._sq_err[1] / steps)
         log["/metrics/survived"] = 0.0 if self._fell else 1.0
         log["/metrics/episode_length_s"] = steps * self.control_dt
-        return {"log": log}
+        return {**extra, "log": log}
+
+    def critic_observation(self) -> np.ndarray:
+        """The critic's privileged observation (``privileged_critic``): the scaled 45
+        observations, the base's linear velocity x 2 and its height error x 10 (float32)."""
+        height = (self._base_height() - self.config.base_height_target) * 10.0
+        return np.concatenate(
+            [self._obs_raw * self._obs_scale, self.base_lin_vel * 2.0, [height]]
+        ).astype(np.float32)
