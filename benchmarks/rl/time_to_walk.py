@@ -67,6 +67,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "ppo_before": {"ppo": {"algorithm": {"learning_rate": 1e-4, "entropy_coef": 0.01}}},
     "lr1e-4": {"ppo": {"algorithm": {"learning_rate": 1e-4}}},
     "ent1e-2": {"ppo": {"algorithm": {"entropy_coef": 0.01}}},
+    "lr5e-4": {"ppo": {"algorithm": {"learning_rate": 5e-4}}},
+    "pushes": {"task": {"randomization": {"push_interval_s": 15.0, "push_velocity": 1.0}}},
     "critic": {"task": {"privileged_critic": True}},
     "mb8": {"ppo": {"algorithm": {"num_mini_batches": 8}}},
     "init_noise": {"task": {"reset_joint_scale": (0.5, 1.5), "reset_base_velocity": 0.5}},
@@ -98,10 +100,12 @@ def variant_settings(text: str) -> tuple[dict[str, Any], dict[str, Any]]:
     for name in variants:
         _merge(ppo, VARIANTS[name].get("ppo", {}))
         _merge(task, VARIANTS[name].get("task", {}))
-    if "commands" in task:
-        from chronogym.tasks.quadruped.config import CommandRanges
+    from chronogym.tasks.quadruped.config import CommandRanges, DomainRandomization
 
+    if "commands" in task:
         task["commands"] = CommandRanges(**task["commands"])
+    if "randomization" in task:
+        task["randomization"] = DomainRandomization(**task["randomization"])
     return ppo, task
 
 
@@ -312,6 +316,9 @@ def main(argv: list[str] | None = None) -> None:
         criterion = WalkingCriterion(max_x_mse=args.max_mse, max_y_mse=args.max_mse)
     except ValueError as error:
         parser.error(f"--max-mse: {error}")
+    missing = [str(d) for d in args.merge if not (d / "time_to_walk.json").is_file()]
+    if missing:
+        parser.error(f"--merge: no time_to_walk.json in {', '.join(missing)}")
     runs = [] if args.merge else [(c, s) for c in args.configs for s in args.seeds]
     if not args.evaluate_only:
         for config, seed in runs:
@@ -327,7 +334,8 @@ def main(argv: list[str] | None = None) -> None:
     sources = ([args.out] if args.keep else []) + list(args.merge)
     earlier = load_earlier(sources, set(runs))
     rows = earlier["rows"] + rows
-    summary = earlier["runs"] + summary
+    order = list(dict.fromkeys(s["config"] for s in earlier["runs"] + summary))
+    summary = sorted(earlier["runs"] + summary, key=lambda s: (order.index(s["config"]), s["seed"]))
     per_config = medians(summary)
     args.out.mkdir(parents=True, exist_ok=True)
     with (args.out / "time_to_walk.csv").open("w", newline="") as handle:

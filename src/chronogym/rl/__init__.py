@@ -22,13 +22,19 @@ _EXPORTS = {
     "quadruped_train_config": "chronogym.rl.quadruped",
     "evaluate": "chronogym.rl.evaluate",
     "VideoRecorder": "chronogym.rl.evaluate",
+    "WalkingCriterion": "chronogym.rl.evaluate",
+    "WalkingEvaluator": "chronogym.rl.evaluate",
+    "BestCheckpoint": "chronogym.rl.best",
 }
 
 __all__ = [
     "FINETUNE_PPO",
+    "BestCheckpoint",
     "RslRlVecEnv",
     "TrainResult",
     "VideoRecorder",
+    "WalkingCriterion",
+    "WalkingEvaluator",
     "evaluate",
     "load_policy",
     "make_quadruped_vec_env",
@@ -40,9 +46,15 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
+    from chronogym.rl.best import BestCheckpoint
     from chronogym.rl.checkpoint import load_policy
     from chronogym.rl.config import FINETUNE_PPO, ppo_train_config
-    from chronogym.rl.evaluate import VideoRecorder, evaluate
+    from chronogym.rl.evaluate import (
+        VideoRecorder,
+        WalkingCriterion,
+        WalkingEvaluator,
+        evaluate,
+    )
     from chronogym.rl.quadruped import (
         make_quadruped_vec_env,
         play_quadruped,
