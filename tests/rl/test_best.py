@@ -193,3 +193,23 @@ def test_eval_episodes_zero_keeps_no_best_and_the_plain_header(tmp_path):
 def test_eval_episodes_must_be_a_count(tmp_path, bad):
     with pytest.raises(ValueError, match="eval_episodes"):
         train_quadruped(tmp_path, iterations=1, eval_episodes=bad)
+
+
+@pytest.mark.parametrize("trained_with", [True, False])
+def test_a_checkpoint_resumes_with_the_critic_it_was_trained_with(
+    tmp_path, monkeypatch, trained_with
+):
+    from chronogym.rl import quadruped
+
+    cfg = quadruped_train_config(num_steps_per_env=4, save_interval=1)
+    common = dict(num_envs=2, backend="serial", train_cfg=cfg, eval_episodes=0, progress=False)
+    first = train_quadruped(
+        tmp_path, iterations=1, task_kwargs={**SHORT, "privileged_critic": trained_with}, **common
+    )
+    assert quadruped.critic_input_size(first.checkpoint) == (49 if trained_with else 45)
+    # whatever the training default says now, the resumed run reads what the critic was built for
+    monkeypatch.setattr(quadruped, "QUADRUPED_TASK", {"privileged_critic": not trained_with})
+    second = train_quadruped(
+        tmp_path, iterations=1, resume=first.checkpoint, task_kwargs=SHORT, **common
+    )
+    assert quadruped.critic_input_size(second.checkpoint) == (49 if trained_with else 45)

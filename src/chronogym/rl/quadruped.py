@@ -34,6 +34,10 @@ TRAINING_DISTRIBUTION = (
     "reset_base_velocity",
 )
 
+#: Task settings of the documented Go1 training, under the caller's ``task_kwargs``
+#: (training only: ``play`` and the checkpoint evaluation run the task as it is).
+QUADRUPED_TASK: dict[str, Any] = {}
+
 #: PPO settings of the documented Go1 run, on top of :func:`ppo_train_config`'s legged_gym
 #: defaults. Few envs (32 on a laptop instead of 4096 on a GPU) make each minibatch small and
 #: noisy: the default 32 envs x 48 steps keep the batch at ~1.5k samples, a smaller initial
@@ -187,6 +191,7 @@ def train_quadruped(
         raise FileNotFoundError(f"resume={str(resume)!r}: no such checkpoint file")
     if update_threads is None:
         update_threads = torch_threads if policy_lag else default_update_threads()
+    task_kwargs = training_task_kwargs(task_kwargs, resume)
     cfg = train_cfg if train_cfg is not None else quadruped_train_config()
     if finetune:
         cfg = {**cfg, "algorithm": {**cfg["algorithm"], **FINETUNE_PPO}}
@@ -223,6 +228,31 @@ def train_quadruped(
         env.close()
         if evaluator is not None:
             evaluator.close()
+
+
+def training_task_kwargs(
+    task_kwargs: dict[str, Any] | None, resume: str | Path | None
+) -> dict[str, Any]:
+    """``QUADRUPED_TASK`` under ``task_kwargs``; a resumed checkpoint keeps the critic
+    observation it was trained with (``privileged_critic`` read from its critic's input
+    size), unless ``task_kwargs`` sets it."""
+    from chronogym.tasks.quadruped.config import OBS_DIM
+
+    kwargs = {**QUADRUPED_TASK, **(task_kwargs or {})}
+    if resume is not None and "privileged_critic" not in (task_kwargs or {}):
+        size = critic_input_size(resume)
+        if size is not None:
+            kwargs["privileged_critic"] = size > OBS_DIM
+    return kwargs
+
+
+def critic_input_size(checkpoint: str | Path) -> int | None:
+    """The number of observations the checkpoint's critic reads (None: not found)."""
+    from chronogym.rl.checkpoint import read_checkpoint
+
+    critic = read_checkpoint(checkpoint, "resume").get("critic_state_dict") or {}
+    weight = critic.get("mlp.0.weight")
+    return int(weight.shape[1]) if weight is not None and weight.ndim == 2 else None
 
 
 def walking_evaluator(
