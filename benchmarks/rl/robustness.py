@@ -37,23 +37,9 @@ CONDITIONS: dict[str, tuple[float | None, float, tuple[float, float] | None]] = 
 }
 
 
-def randomization(push: float | None, interval: float, friction: Any) -> Any:
-    """The ``DomainRandomization`` of one condition (None: nominal)."""
-    from chronogym.tasks.quadruped.config import DomainRandomization
-
-    if push is None and friction is None:
-        return None
-    return DomainRandomization(
-        friction=friction,
-        added_base_mass=None,
-        push_interval_s=interval if push is not None else None,
-        push_velocity=push or 0.0,
-    )
-
-
 def main(argv: list[str] | None = None) -> None:
     from chronogym.rl.evaluate import WalkingCriterion
-    from chronogym.rl.quadruped import play_quadruped
+    from chronogym.rl.quadruped import play_quadruped, play_randomization
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("checkpoint", type=Path)
@@ -71,7 +57,7 @@ def main(argv: list[str] | None = None) -> None:
             args.checkpoint,
             episodes=args.episodes,
             progress=False,
-            randomization=randomization(push, interval, friction),
+            randomization=play_randomization(push, interval, friction),
         )
         results.append({
             "condition": name, "push_velocity": push, "push_interval_s": interval or None,

@@ -352,7 +352,7 @@ def open_study(url: str, study_name: str, sampler: Any) -> Any:
 
 def play_randomization(args: argparse.Namespace) -> Any:
     """The ``DomainRandomization`` of ``play --push`` / ``--friction`` (None: neither)."""
-    from chronogym.tasks.quadruped.config import DomainRandomization
+    from chronogym.rl.quadruped import play_randomization as randomization
 
     friction = None
     if args.friction is not None:
@@ -362,14 +362,7 @@ def play_randomization(args: argparse.Namespace) -> Any:
                 f"--friction {low:g} {high:g}: expected 0 < LO <= HI (friction coefficients)"
             )
         friction = (low, high)
-    if not args.push and friction is None:
-        return None
-    return DomainRandomization(
-        friction=friction,
-        added_base_mass=None,
-        push_interval_s=args.push_interval if args.push else None,
-        push_velocity=args.push_velocity if args.push else 0.0,
-    )
+    return randomization(args.push_velocity if args.push else None, args.push_interval, friction)
 
 
 def describe_randomization(dr: Any) -> str:

@@ -25,7 +25,7 @@ ENGINE_TERRAINS: dict[str, tuple[str, ...]] = {"mujoco": TERRAINS, "chrono": ("r
 #: Task settings for training only (what it sees: commands, randomization, initial states;
 #: the critic's observation), left out of the evaluation envs, which run the task as
 #: ``chronogym play`` does.
-TRAINING_DISTRIBUTION = (
+TRAINING_ONLY = (
     "privileged_critic",
     "commands",
     "randomization",
@@ -259,14 +259,14 @@ def walking_evaluator(
     engine: str, terrain: str, task_kwargs: dict[str, Any] | None, episodes: int
 ) -> Any:
     """A :class:`~chronogym.rl.evaluate.WalkingEvaluator` on the training's task as
-    ``chronogym play`` makes it (the ``TRAINING_DISTRIBUTION`` settings left out): the
+    ``chronogym play`` makes it (the ``TRAINING_ONLY`` settings left out): the
     standard commands, ``episodes`` episodes each (seeds 0, 1, ...)."""
     import gymnasium as gym
 
     from chronogym.rl.evaluate import WalkingCriterion, WalkingEvaluator
 
     env_id = ENV_IDS[engine]
-    physics = {k: v for k, v in (task_kwargs or {}).items() if k not in TRAINING_DISTRIBUTION}
+    physics = {k: v for k, v in (task_kwargs or {}).items() if k not in TRAINING_ONLY}
     kwargs = env_kwargs_for(terrain, physics, engine)
     return WalkingEvaluator(lambda: gym.make(env_id, **kwargs), WalkingCriterion(episodes=episodes))
 
@@ -343,6 +343,26 @@ def play_quadruped(
     finally:
         env.close()
     return summarize(results)
+
+
+def play_randomization(
+    push_velocity: float | None = None,
+    push_interval_s: float = 5.0,
+    friction: tuple[float, float] | None = None,
+) -> Any:
+    """The ``DomainRandomization`` that ``play --push`` / ``--friction`` evaluate under: pushes
+    of up to ``push_velocity`` m/s per axis every ``push_interval_s`` (None: no pushes) and
+    per-episode friction in ``friction``; no added mass. None when neither is asked for."""
+    from chronogym.tasks.quadruped.config import DomainRandomization
+
+    if push_velocity is None and friction is None:
+        return None
+    return DomainRandomization(
+        friction=friction,
+        added_base_mass=None,
+        push_interval_s=push_interval_s if push_velocity is not None else None,
+        push_velocity=push_velocity or 0.0,
+    )
 
 
 def check_can_render() -> None:
