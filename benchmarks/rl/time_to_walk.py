@@ -75,6 +75,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "vx1.5": {"task": {"commands": {"vx": (-0.5, 1.5)}}},
     "zero_cmd": {"task": {"commands": {"zero_below": 0.2, "standing_share": 0.1}}},
     "axis_cmd": {"task": {"commands": {"single_axis_share": 0.3, "standing_share": 0.1}}},
+    "sigma0.15": {"task": {"tracking_sigma": 0.15}},
+    "sigma0.1": {"task": {"tracking_sigma": 0.1}},
+    "ep10s": {"task": {"max_episode_steps": 500}},
 }
 
 

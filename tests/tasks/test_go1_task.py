@@ -124,6 +124,20 @@ def test_tracking_terms_are_positive_and_peak_on_the_command():
     assert 0 < off["tracking_ang_vel"] < on["tracking_ang_vel"]
 
 
+def test_tracking_sigma_sets_the_width_of_both_kernels():
+    lin = {}
+    for sigma in (0.25, 0.1):
+        task = _env(tracking_sigma=sigma).task
+        # 0.1 m/s off the command in x, 0.2 rad/s off in yaw rate
+        _set_state(task, lin_vel=(0.6, -0.2, 0), ang_vel=(0, 0, 0.5), quat=(1, 0, 0, 0))
+        terms = _terms(task)
+        dt = task.control_dt
+        assert terms["tracking_lin_vel"] == pytest.approx(1.0 * dt * math.exp(-0.01 / sigma))
+        assert terms["tracking_ang_vel"] == pytest.approx(0.5 * dt * math.exp(-0.04 / sigma))
+        lin[sigma] = terms["tracking_lin_vel"]
+    assert lin[0.1] < lin[0.25]
+
+
 @pytest.mark.parametrize(
     ("term", "state"),
     [

@@ -200,6 +200,9 @@ class Go1TaskConfig:
     max_tilt: float = 1.0
     #: Base height the ``base_height`` term pulls towards [m].
     base_height_target: float = HOME_BASE_HEIGHT
+    #: Width of the exponential tracking kernels, exp(-error^2 / sigma) [(m/s)^2, (rad/s)^2]
+    #: (legged_gym, Isaac Lab and MuJoCo Playground: 0.25); smaller rewards close tracking more.
+    tracking_sigma: float = 0.25
     #: A swing longer than this earns the ``feet_air_time`` term [s], in [0, 5).
     air_time_threshold: float = 0.25
     #: Joint angles start uniform within +- this of the home pose [rad], in [0, 0.5].
@@ -234,7 +237,13 @@ class Go1TaskConfig:
         _check_type("commands", self.commands, CommandRanges)
         _check_type("rewards", self.rewards, RewardWeights)
         _check_type("randomization", self.randomization, DomainRandomization, optional=True)
-        for name in ("action_scale", "action_clip", "max_tilt", "base_height_target"):
+        for name in (
+            "action_scale",
+            "action_clip",
+            "max_tilt",
+            "base_height_target",
+            "tracking_sigma",
+        ):
             value = getattr(self, name)
             if not (_is_number(value) and value > 0):
                 raise ValueError(f"{name}={value!r}: expected a finite float > 0")

@@ -56,7 +56,6 @@ from chronogym.tasks.quadruped.model import DEFAULT_JOINT_POS
 
 #: Reward terms in the order of ``RewardWeights``' fields (the task's term vector).
 REWARD_TERMS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RewardWeights))
-_TRACKING_SIGMA = 0.25  # (m/s)^2 and (rad/s)^2 of the exponential tracking kernels
 _ANG_VEL = obs_group("base_ang_vel")
 _GRAVITY = obs_group("projected_gravity")
 _GRAVITY_Z = OBS_SLICES["projected_gravity"][0] + 2
@@ -372,11 +371,12 @@ class Go1VelocityBase(Task):
         """exp(-|v_xy - cmd_xy|^2 / sigma)."""
         vx, vy, _ = motion.lin_vel
         cmd_x, cmd_y, _ = motion.command
-        return math.exp(-((vx - cmd_x) ** 2 + (vy - cmd_y) ** 2) / _TRACKING_SIGMA)
+        return math.exp(-((vx - cmd_x) ** 2 + (vy - cmd_y) ** 2) / self.config.tracking_sigma)
 
     def _reward_tracking_ang_vel(self, motion: BaseMotion) -> float:
         """exp(-(w_z - cmd_wz)^2 / sigma)."""
-        return math.exp(-((motion.ang_vel[2] - motion.command[2]) ** 2) / _TRACKING_SIGMA)
+        error = motion.ang_vel[2] - motion.command[2]
+        return math.exp(-(error**2) / self.config.tracking_sigma)
 
     def _reward_lin_vel_z(self, motion: BaseMotion) -> float:
         """v_z^2."""
