@@ -77,8 +77,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "axis_cmd": {"task": {"commands": {"single_axis_share": 0.3, "standing_share": 0.1}}},
     "sigma0.15": {"task": {"tracking_sigma": 0.15}},
     "sigma0.1": {"task": {"tracking_sigma": 0.1}},
-    # 10 s training episodes. Training's own evaluation (best.pt) then runs 10 s episodes
-    # too; the committed runs' ran 20 s ones. This script's check always runs 20 s ones.
+    # 10 s training episodes. Training's own evaluation (for best.pt) then runs 10 s episodes
+    # too, where that of the committed runs ran 20 s ones; this script's check runs 20 s.
     "ep10s": {"task": {"max_episode_steps": 500}},
 }
 
