@@ -13,7 +13,7 @@ from tensordict import TensorDict
 from chronogym.rl.checkpoint import load_policy, read_checkpoint
 from chronogym.rl.progress import ProgressBar
 from chronogym.rl.quadruped import make_quadruped_vec_env, quadruped_train_config
-from chronogym.rl.runner import Budget, Runner
+from chronogym.rl.trainer import Budget, Runner
 from chronogym.rl.vecenv import RslRlVecEnv
 
 

@@ -15,9 +15,10 @@ from test_rsl_adapter import LogCartPole
 
 import chronogym
 from chronogym.rl import ppo_train_config, train
-from chronogym.rl.config import PROGRESS_METRICS
 from chronogym.rl.progress import ProgressBar, ProgressLog, progress_columns
-from chronogym.rl.trainer import CSV_HEADER
+
+PROGRESS_METRICS = {"x_mse": "/metrics/x_vel_mse", "y_mse": "/metrics/y_vel_mse"}  # the Go1's
+CSV_HEADER = progress_columns(PROGRESS_METRICS)
 
 METRIC_ENV = "chronogym-test/MetricCartPole-v0"
 HORIZON = 4
@@ -64,7 +65,10 @@ def test_train_writes_a_column_for_every_metric_the_env_reports(tmp_path):
     small = {"hidden_dims": [8]}
     cfg = ppo_train_config(num_steps_per_env=HORIZON, actor=small, critic=small)
     try:
-        result = train(vec, tmp_path, iterations=2, train_cfg=cfg, progress=False)
+        result = train(
+            vec, tmp_path, iterations=2, train_cfg=cfg, progress=False,
+            progress_metrics=PROGRESS_METRICS,
+        )  # fmt: skip
     finally:
         vec.close()
     header, rows = read(result.csv_path)

@@ -21,13 +21,14 @@ from chronogym.rl import (
     ppo_train_config,
     train,
 )
-from chronogym.rl.trainer import CSV_HEADER
+from chronogym.rl.progress import progress_columns
 from chronogym.tasks.cartpole import CartPoleTask
 
 CARTPOLE = "chronogym/CartPole-v0"
 LOG_ENV = "chronogym-test/LogCartPole-v0"
 SAME_STEP = gym.vector.AutoresetMode.SAME_STEP
 HORIZON = 3
+METRICS = {"x_mse": "/metrics/x_vel_mse", "y_mse": "/metrics/y_vel_mse"}  # pinned columns
 
 
 class LogCartPole(CartPoleTask):
@@ -209,17 +210,21 @@ def test_train_on_ray(ray_cluster, tmp_path):
 def test_train_serial_resume_and_policy(tmp_path, capsys):
     env = RslRlVecEnv(serial(LOG_ENV), seed=0)
     try:
-        first = train(env, tmp_path, iterations=2, train_cfg=tiny_cfg(), progress=False)
+        first = train(
+            env, tmp_path, iterations=2, train_cfg=tiny_cfg(), progress=False,
+            progress_metrics=METRICS,
+        )  # fmt: skip
         assert capsys.readouterr().out == ""  # RSL-RL's console output is suppressed
         rows = read_rows(first.csv_path)
-        assert tuple(rows[0]) == CSV_HEADER
+        assert tuple(rows[0]) == progress_columns(METRICS)
         assert len(rows) == 2 and float(rows[1]["x_mse"]) == pytest.approx(0.25)
         assert float(rows[1]["mean_reward"]) == pytest.approx(HORIZON)
 
         finetune = tiny_cfg(**FINETUNE_PPO)
         second = train(
-            env, tmp_path, iterations=1, resume=first.checkpoint, train_cfg=finetune, progress=False
-        )
+            env, tmp_path, iterations=1, resume=first.checkpoint, train_cfg=finetune,
+            progress=False, progress_metrics=METRICS,
+        )  # fmt: skip
     finally:
         env.close()
     rows = read_rows(second.csv_path)

@@ -14,7 +14,7 @@ _EXPORTS = {
     "ppo_train_config": "chronogym.rl.config",
     "FINETUNE_PPO": "chronogym.rl.config",
     "train": "chronogym.rl.trainer",
-    "TrainResult": "chronogym.rl.runner",
+    "TrainResult": "chronogym.rl.trainer",
     "load_policy": "chronogym.rl.checkpoint",
     "make_quadruped_vec_env": "chronogym.rl.quadruped",
     "train_quadruped": "chronogym.rl.quadruped",
@@ -61,8 +61,7 @@ if TYPE_CHECKING:
         quadruped_train_config,
         train_quadruped,
     )
-    from chronogym.rl.runner import TrainResult
-    from chronogym.rl.trainer import train
+    from chronogym.rl.trainer import TrainResult, train
     from chronogym.rl.vecenv import RslRlVecEnv
 
 

@@ -10,12 +10,6 @@ FINETUNE_PPO: dict[str, float] = dict(
     learning_rate=1e-5, clip_param=0.02, desired_kl=0.001, max_grad_norm=0.5
 )
 
-#: Metric columns of every ``progress.csv`` (column -> ``info["log"]`` key), NaN where the env
-#: reports no such metric, so the tables of all tasks share them: the episode-mean velocity
-#: tracking errors of the locomotion tasks. Other ``/metrics/*`` keys get columns as they appear
-#: (:class:`~chronogym.rl.progress.ProgressLog`).
-PROGRESS_METRICS: dict[str, str] = {"x_mse": "/metrics/x_vel_mse", "y_mse": "/metrics/y_vel_mse"}
-
 _HIDDEN_DIMS = [512, 256, 128]
 
 _DEFAULTS: dict[str, Any] = {

@@ -1,5 +1,8 @@
 """Training progress: ``progress.csv`` (:class:`ProgressLog`) and a bar (:class:`ProgressBar`).
 
+An :class:`Iteration` is what one PPO iteration's collection and update did: the losses for
+RSL-RL's logger and the timing columns of its row.
+
 A row of ``progress.csv`` has the :data:`RUN_COLUMNS`, one column per metric, then the
 :data:`TIMING_COLUMNS`. A metric is a key under ``/metrics/`` of the ``info["log"]`` that a
 task reports when an episode ends (``RslRlVecEnv`` gathers them into ``extras["log"]``); its
@@ -11,10 +14,14 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import torch
 
 #: Columns before the metrics: seconds since the start, PPO iteration, env steps of the whole
 #: run, and RSL-RL's mean episode return (over its last 100 episodes).
@@ -22,6 +29,17 @@ RUN_COLUMNS = ("wall_time", "iteration", "env_steps", "mean_reward")
 #: Columns after the metrics: seconds collecting and updating, and the update's policy lag.
 TIMING_COLUMNS = ("collect_s", "learn_s", "policy_lag")
 METRIC_PREFIX = "/metrics/"
+
+
+@dataclass(frozen=True)
+class Iteration:
+    """What one iteration's collection and update did: the update's mean losses, the seconds
+    spent collecting (returns included) and updating, and the update's policy lag."""
+
+    losses: dict[str, float]
+    collect_s: float
+    learn_s: float
+    policy_lag: int
 
 
 def progress_columns(metric_columns: Iterable[str], extra: Iterable[str] = ()) -> tuple[str, ...]:
@@ -68,7 +86,7 @@ class ProgressLog:
         """The header, in order."""
         return progress_columns(self.metrics.values(), self.extra)
 
-    def record(self, log: Mapping[str, Any]) -> None:
+    def record(self, log: Mapping[str, torch.Tensor | np.ndarray]) -> None:
         """Keep the metrics of the episodes that ended in one env step (``extras["log"]``:
         key -> values of those episodes)."""
         for key, values in log.items():
@@ -129,7 +147,7 @@ class ProgressBar:
         enabled: bool,
         iterations: int | None,
         budget_s: float,
-        log: Callable[[str], Any],
+        log: Callable[[str], object],
     ) -> None:
         self.bar = None
         self.log = log if enabled else None

@@ -177,8 +177,7 @@ def train_quadruped(
     """
     from chronogym.rl.config import FINETUNE_PPO
     from chronogym.rl.overlap import check_policy_lag
-    from chronogym.rl.runner import Budget
-    from chronogym.rl.trainer import train
+    from chronogym.rl.trainer import Budget, train
     from chronogym.rl.vecenv import RslRlVecEnv
 
     Budget.of(iterations, minutes)  # checked before any worker starts
