@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from chronogym.rl.config import ppo_train_config
+
 
 def read_checkpoint(path: str | Path, name: str) -> dict[str, Any]:
     """A checkpoint's dict, read with ``weights_only=True``: never unpickles objects.
@@ -53,8 +55,6 @@ def load_policy(
     import torch
     from rsl_rl.utils import resolve_class
     from tensordict import TensorDict
-
-    from chronogym.rl.config import ppo_train_config
 
     if torch_threads is not None:
         torch.set_num_threads(torch_threads)

@@ -104,6 +104,13 @@ def _update_threads(torch_threads: int, update_threads: int | None, policy_lag: 
     return update_threads
 
 
+def _seed(seed: int, torch_threads: int) -> None:
+    """Seed torch's and NumPy's global generators; set torch's CPU threads."""
+    torch.set_num_threads(torch_threads)
+    torch.manual_seed(seed)
+    np.random.seed(seed)
+
+
 def _check_progress_metrics(progress_metrics: Mapping[str, str] | None) -> dict[str, str]:
     """``progress_metrics`` as a dict of column -> ``/metrics/...`` key."""
     pinned = dict(progress_metrics or {})
@@ -137,17 +144,14 @@ def train(
     """Train a PPO policy on a vector env (or an :class:`RslRlVecEnv`); return what was done.
 
     Stops after ``iterations`` PPO iterations or, with ``minutes``, before starting an
-    iteration that is expected to end past the wall-clock budget (at least one runs);
-    with both, whichever comes first. Writes into ``out_dir``: ``progress.csv`` (one
-    row per iteration, a column per ``/metrics/*`` key the env reports; see
-    :class:`~chronogym.rl.progress.ProgressLog`), TensorBoard events, ``model_{it}.pt``
-    every ``save_interval`` iterations and at the end, and ``latest.pt`` (a copy of the
-    newest checkpoint).
+    iteration expected to end past the wall-clock budget (at least one runs); with both,
+    whichever comes first. Writes into ``out_dir``: ``progress.csv`` (a row per iteration;
+    see :class:`~chronogym.rl.progress.ProgressLog`), TensorBoard events, ``model_{it}.pt``
+    every ``save_interval`` iterations and at the end, and ``latest.pt`` (the newest of them).
 
-    ``progress_metrics``: metric columns of ``progress.csv`` that every row has from the first
-    on, NaN until the env reports them (column name -> ``info["log"]`` key, e.g. the Go1's
-    ``{"x_mse": "/metrics/x_vel_mse"}``); other ``/metrics/*`` keys get a column named after
-    the key when they first appear.
+    ``progress_metrics`` (column -> ``info["log"]`` key, e.g. the Go1's ``{"x_mse":
+    "/metrics/x_vel_mse"}``): metric columns that every row has from the first on, NaN until
+    the env reports them; other keys get a column named after the key when they first appear.
 
     ``resume``: a checkpoint of an earlier run; its models, optimizer, iteration count
     and env-step count carry on and rows are appended to ``progress.csv``. When
@@ -163,9 +167,8 @@ def train(
     the simulations step). ``update_threads``: threads for the synchronous PPO update
     (``policy_lag=0``), which runs while every simulation waits, so it can take all the
     cores; ``None`` keeps ``torch_threads``. With ``policy_lag=1`` the update overlaps the
-    rollout and runs on ``torch_threads``.
-
-    ``verbose``: let RSL-RL print its model summary and per-iteration console block.
+    rollout and runs on ``torch_threads``. ``verbose``: let RSL-RL print its model summary
+    and per-iteration console block.
 
     ``evaluator``: scores every saved checkpoint (e.g. a
     :class:`~chronogym.rl.evaluate.WalkingEvaluator`); the best so far is copied to
@@ -176,18 +179,13 @@ def train(
     policy_lag = check_policy_lag(policy_lag)
     update_threads = _update_threads(torch_threads, update_threads, policy_lag)
     pinned = _check_progress_metrics(progress_metrics)
-    torch.set_num_threads(torch_threads)
-    torch.manual_seed(seed)
-    np.random.seed(seed)
+    _seed(seed, torch_threads)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    env = (
-        vec_env_or_adapter
-        if isinstance(vec_env_or_adapter, RslRlVecEnv)
-        else RslRlVecEnv(vec_env_or_adapter, seed=seed)
-    )
+    if not isinstance(vec_env_or_adapter, RslRlVecEnv):
+        vec_env_or_adapter = RslRlVecEnv(vec_env_or_adapter, seed=seed)
     runner = Runner(
-        env,
+        vec_env_or_adapter,
         out,
         train_cfg if train_cfg is not None else ppo_train_config(),
         seed=seed,
@@ -202,14 +200,19 @@ def train(
         runner.resume(resume)
     result = runner.learn(budget, ProgressBar(progress, iterations, budget.seconds, log))
     if progress:
-        log(
-            f"trained iterations {runner.start_it}..{result.iterations_done - 1} "
-            f"({result.env_steps} env steps in total) in {result.wall_time:.1f} s; "
-            f"checkpoint {result.checkpoint}"
-        )
-        if result.best:
-            log(result.best)
+        _report(result, runner.start_it, log)
     return result
+
+
+def _report(result: TrainResult, start_it: int, log: Callable[[str], object]) -> None:
+    """Say what a training call did: iterations, env steps, seconds, checkpoint, best."""
+    log(
+        f"trained iterations {start_it}..{result.iterations_done - 1} "
+        f"({result.env_steps} env steps in total) in {result.wall_time:.1f} s; "
+        f"checkpoint {result.checkpoint}"
+    )
+    if result.best:
+        log(result.best)
 
 
 class Runner:

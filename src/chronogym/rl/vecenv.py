@@ -8,9 +8,11 @@ from typing import Any
 import numpy as np
 import torch
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
+from gymnasium.vector import AutoresetMode, VectorEnv
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
+
+from chronogym.validation import check_int, is_int
 
 
 class RslRlVecEnv(VecEnv):
@@ -46,7 +48,7 @@ class RslRlVecEnv(VecEnv):
 
     def __init__(
         self,
-        vec_env: Any,
+        vec_env: VectorEnv,
         *,
         device: str | torch.device = "cpu",
         clip_actions: bool = True,
@@ -85,13 +87,7 @@ class RslRlVecEnv(VecEnv):
                     f"RslRlVecEnv could not find the episode horizon of {env_id or vec_env}; "
                     "pass max_episode_length=... (or give the envs a max_episode_steps)"
                 )
-        if (
-            isinstance(max_episode_length, bool)
-            or not isinstance(max_episode_length, (int, np.integer))
-            or max_episode_length < 1
-        ):
-            raise ValueError(f"max_episode_length={max_episode_length!r}: expected an integer >= 1")
-        self.max_episode_length = int(max_episode_length)
+        self.max_episode_length = check_int("max_episode_length", max_episode_length, low=1)
         self.episode_length_buf = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
         self.episodes_done = 0  # episodes finished (terminated or truncated) so far
         self.cfg: dict[str, Any] = {
@@ -110,7 +106,7 @@ class RslRlVecEnv(VecEnv):
         self._update_critic(infos)
 
     # -- observations ------------------------------------------------------------------
-    def _flatten(self, obs: Any) -> np.ndarray:
+    def _flatten(self, obs: np.ndarray) -> np.ndarray:
         return np.array(obs, dtype=np.float32).reshape(self.num_envs, -1)
 
     def _update_critic(self, infos: dict[str, Any]) -> None:
@@ -190,7 +186,7 @@ class RslRlVecEnv(VecEnv):
         self.vec_env.close()
 
 
-def _env_id(vec_env: Any) -> str | None:
+def _env_id(vec_env: VectorEnv) -> str | None:
     spec = getattr(vec_env, "spec", None)
     if spec is not None and getattr(spec, "id", None):
         return spec.id
@@ -204,7 +200,7 @@ def _env_id(vec_env: Any) -> str | None:
         return None
 
 
-def _read_horizon(vec_env: Any) -> int | None:
+def _read_horizon(vec_env: VectorEnv) -> int | None:
     """The shortest horizon among the envs' TimeLimit spec and SimEnv's max_episode_steps."""
     candidates: list[int] = []
     for name in ("spec", "max_episode_steps"):
@@ -214,6 +210,6 @@ def _read_horizon(vec_env: Any) -> int | None:
             continue
         for value in values:
             steps = getattr(value, "max_episode_steps", None) if name == "spec" else value
-            if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps > 0:
+            if is_int(steps) and steps > 0:
                 candidates.append(int(steps))
     return min(candidates) if candidates else None
