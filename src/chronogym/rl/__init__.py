@@ -1,6 +1,20 @@
 """Reinforcement learning with RSL-RL on chronogym vector envs (``pip install 'chronogym[rl]'``).
 
 Public names are imported lazily: ``import chronogym.rl`` imports neither torch nor rsl_rl.
+
+A training iteration, stage by stage (``Runner.learn`` in ``trainer.py``, which
+:func:`train` runs):
+
+1. collect a rollout and compute its returns (``trainer.py``), stepping the vector env through
+   the RSL-RL ``VecEnv`` adapter (``vecenv.py``);
+2. update the policy with RSL-RL's PPO (``trainer.py``); with ``policy_lag=1`` the update of
+   one rollout overlaps the collection of the next instead (``overlap.py``);
+3. every ``save_interval`` iterations, save a checkpoint (``trainer.py``) and score it for
+   ``best.pt`` (``best.py``);
+4. log: RSL-RL's logger and a ``progress.csv`` row (``progress.py``).
+
+``rsl.py`` is the one place that reaches into RSL-RL's runner, logger and PPO object;
+``checkpoint.py`` reads checkpoints back (``load_policy``); ``config.py`` holds the PPO config.
 """
 
 from __future__ import annotations
