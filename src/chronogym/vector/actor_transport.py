@@ -13,8 +13,8 @@ import traceback
 from typing import Any
 
 from chronogym.ray_runtime import actor_scheduling, start_with_retries
+from chronogym.vector.backend import Outcome, error_outcome
 from chronogym.vector.group import EnvGroup
-from chronogym.vector.wire import Outcome, error_outcome
 
 
 class ActorBackend:

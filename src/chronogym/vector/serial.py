@@ -9,9 +9,9 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
-from chronogym.vector.driver import WorkerVectorEnv
+from chronogym.vector.backend import EnvFactory, Outcome, error_outcome
 from chronogym.vector.group import EnvGroup
-from chronogym.vector.wire import EnvFactory, Outcome, error_outcome
+from chronogym.vector.worker_vector_env import WorkerVectorEnv
 
 
 class LocalBackend:

@@ -2,8 +2,8 @@
 
 :class:`InFlight` knows only the backend and which envs each worker holds; the
 driver's ``send`` / ``recv`` / ``step_async`` / ``step_wait`` / ``async_reset``
-(:class:`~chronogym.vector.driver.WorkerVectorEnv`) decide what to send and what
-the answers mean. A call is always a whole worker's call: one remote call steps
+(:class:`~chronogym.vector.worker_vector_env.WorkerVectorEnv`) decide what to send
+and what the answers mean. A call is always a whole worker's call: one remote call steps
 every env that worker holds.
 """
 
@@ -12,19 +12,28 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import Enum
 from typing import Any
 
 import numpy as np
 
 from chronogym.errors import RecvTimeoutError
-from chronogym.vector.wire import Backend, Outcome
+from chronogym.vector.backend import Backend, Outcome
+
+
+class CallKind(Enum):
+    """What a call in flight does: a step (``send``, ``step_async``) or a reset
+    (``async_reset``)."""
+
+    STEP = "step"
+    RESET = "reset"
 
 
 @dataclass
 class PendingCall:
     """One worker's call in flight."""
 
-    kind: str  # "step" or "reset"
+    kind: CallKind
     handle: Any  # what Backend.submit returned
     submitted: float  # time.monotonic() at submission
     args: tuple[Any, ...]  # kept to redo a reset on a replacement worker
@@ -49,10 +58,10 @@ class InFlight:
         ids = [np.arange(*self._slices[w], dtype=np.int64) for w in sorted(self.calls)]
         return np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
 
-    def kinds(self) -> set[str]:
+    def kinds(self) -> set[CallKind]:
         return {call.kind for call in self.calls.values()}
 
-    def submit(self, kind: str, method: str, workers: list[int], args: list[tuple]) -> None:
+    def submit(self, kind: CallKind, method: str, workers: list[int], args: list[tuple]) -> None:
         """Send each of ``workers`` its call (``args`` in the same order)."""
         for w, a in zip(workers, args, strict=True):
             handle = self._backend.submit(w, method, *a)
