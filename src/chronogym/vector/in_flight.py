@@ -22,11 +22,12 @@ from chronogym.vector.backend import Backend, Outcome
 
 
 class CallKind(Enum):
-    """What a call in flight does: a step (``send``, ``step_async``) or a reset
-    (``async_reset``)."""
+    """What a call in flight does: a step (``send``, ``step_async``), a reset
+    (``async_reset``), or a trial of :mod:`chronogym.optim.parallel`."""
 
     STEP = "step"
     RESET = "reset"
+    TRIAL = "trial"
 
 
 @dataclass
@@ -42,9 +43,17 @@ class PendingCall:
 class InFlight:
     """The calls in flight, at most one per worker, and the waiting for their answers."""
 
-    def __init__(self, backend: Backend, slices: Sequence[tuple[int, int]]) -> None:
+    def __init__(
+        self,
+        backend: Backend,
+        slices: Sequence[tuple[int, int]],
+        overdue_message: str | None = None,
+    ) -> None:
+        """``slices``: the envs ``(lo, hi)`` of each worker; ``overdue_message``: the error
+        of a call lost to the backend's ``step_timeout`` (default: one naming it)."""
         self._backend = backend
         self._slices = slices
+        self._overdue_message = overdue_message
         self.calls: dict[int, PendingCall] = {}  # worker -> its call in flight
 
     def __bool__(self) -> bool:
@@ -95,7 +104,7 @@ class InFlight:
         answered = sorted(ready)
         gathered = self._backend.gather(answered, [self.calls[w].handle for w in answered])
         outcomes = dict(zip(answered, gathered, strict=True))
-        message = f"no answer within step_timeout={self._step_timeout} s"
+        message = self._overdue_message or f"no answer within step_timeout={self._step_timeout} s"
         outcomes.update({w: Outcome(False, None, message, lost=True) for w in overdue})
         return {w: (self.calls.pop(w), outcomes[w]) for w in sorted(outcomes)}
 
