@@ -61,8 +61,10 @@ def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
     if status == FAILED:
         failure = pickle.loads(parts[4])  # trusted: own worker (a private socket)
         return error_outcome(failure.error, failure.text)
-    extra = pickle.loads(parts[4]) if sizes[4] else (None, None)  # trusted: own worker
-    return Outcome(True, StepAnswer(*(bytes(p) for p in parts[:4]), *extra))
+    obs, rewards, terminations, truncations, tail = parts
+    extra = pickle.loads(tail) if sizes[4] else (None, None)  # trusted: own worker
+    answer = StepAnswer(bytes(obs), bytes(rewards), bytes(terminations), bytes(truncations), *extra)
+    return Outcome(True, answer)
 
 
 def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
