@@ -34,6 +34,9 @@ hops, except that the calls wait in ``in_flight.py``: ``InFlight.submit`` /
 ``InFlight.collect`` (``Backend.wait``, then ``Backend.gather``) until enough envs
 have answered, and ``_pending_result`` reads each answer. The docs' "How it works"
 section of the vector envs guide (docs/guides/vector-envs.md) draws the same path.
+
+:mod:`chronogym.optim.parallel` runs its Optuna trials on the same machinery: an
+``ActorBackend`` (or ``LocalBackend``) of ``TrialWorker``s and an ``InFlight``.
 """
 
 from __future__ import annotations
