@@ -51,6 +51,7 @@ from chronogym.integrations._indexed import (
 )
 from chronogym.integrations._sb3_batches import batch_actions, sb3_obs, split_info
 from chronogym.validation import check_int
+from chronogym.vector.factory import BACKENDS
 
 __all__ = [
     "BACKENDS",
@@ -61,7 +62,6 @@ __all__ = [
     "split_info",
 ]
 
-BACKENDS = ("ray", "serial", "sync", "async")
 SAME_STEP = AutoresetMode.SAME_STEP
 
 # chronogym reports a replaced worker in the top-level info, next to the reset info;

@@ -2,9 +2,16 @@
 
 The driver owns the study: it asks for a trial, samples its parameters
 (``suggest(trial)``), hands them to a free worker and tells the result back
-when the worker answers (``ray.wait`` for the first finished of W in flight).
-Each worker builds its evaluator once (``evaluator_factory()``) and keeps it
-between trials, so heavy set-up is paid once per worker.
+when the worker answers. Each worker builds its evaluator once
+(``evaluator_factory()``) and keeps it between trials, so heavy set-up is paid
+once per worker.
+
+The workers run on the vector envs' machinery: a :class:`TrialWorker` is a
+worker of an :class:`~chronogym.vector.actor_transport.ActorBackend` (one Ray
+actor each) or, with ``backend="serial"``, of a
+:class:`~chronogym.vector.serial.LocalBackend` (this process), and the trials
+in flight wait in an :class:`~chronogym.vector.in_flight.InFlight`, as a
+vector env's ``send`` / ``recv`` do.
 
 Nothing is lost:
 
@@ -21,15 +28,27 @@ Only one driver should run a given study at a time.
 
 from __future__ import annotations
 
+import math
+import os
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
+
+from tqdm import tqdm
+
+from chronogym.ray_runtime import actor_scheduling, ensure_ray, resolve_worker_cpus
+from chronogym.validation import check_int, check_positive
+from chronogym.vector.actor_transport import ActorBackend
+from chronogym.vector.backend import Backend, Outcome
+from chronogym.vector.in_flight import CallKind, InFlight
+from chronogym.vector.serial import LocalBackend
 
 Evaluator = Callable[[dict[str, Any]], tuple[float, dict[str, Any]]]
 FINISHED_STATES = ("COMPLETE", "FAIL", "PRUNED")
+BACKENDS = ("ray", "serial")
 
 
 class TrialFailure(Exception):
@@ -46,8 +65,6 @@ class TrialWorker:
         return True
 
     def pid(self) -> int:
-        import os
-
         return os.getpid()
 
     def evaluate(self, params: dict[str, Any]) -> tuple[str, Any, Any]:
@@ -58,17 +75,22 @@ class TrialWorker:
             return "fail", f"{type(failure).__name__}: {failure}", None
         except Exception:
             return "fail", traceback.format_exc(limit=8), None
-        if (
-            not isinstance(value, (int, float))
-            or value != value
-            or value
-            in (
-                float("inf"),
-                float("-inf"),
-            )
-        ):
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
             return "fail", f"objective value {value!r} is not a finite number", None
         return "ok", float(value), attrs
+
+
+class TrialActors(ActorBackend):
+    """W Ray actors, each a :class:`TrialWorker` (``ray::TrialWorker`` processes)."""
+
+    worker_cls = TrialWorker
+    builds = "its evaluator"
+
+
+class LocalTrials(LocalBackend):
+    """One :class:`TrialWorker` in this process (debugging, W=1 without Ray)."""
+
+    worker_cls = TrialWorker
 
 
 @dataclass
@@ -92,124 +114,14 @@ class StudyReport:
     """(seconds since start, trial number, value or None if failed, best so far)."""
 
 
-class _Pool(Protocol):
-    def submit(self, worker: int, params: dict[str, Any]) -> Any: ...
-    def wait_one(self, timeout: float | None) -> list[Any]: ...
-    def result(self, handle: Any) -> tuple[str, Any, Any]: ...
-    def replace(self, worker: int) -> None: ...
-    def shutdown(self) -> None: ...
-
-
-class _SerialPool:
-    """Evaluates in this process, one trial at a time (debugging, W=1 without Ray)."""
-
-    def __init__(self, evaluator_factory: Callable[[], Evaluator]) -> None:
-        self.factory = evaluator_factory
-        self.worker = TrialWorker(evaluator_factory)
-        self.done: deque[Any] = deque()
-
-    def submit(self, worker: int, params: dict[str, Any]) -> Any:
-        handle = object()
-        self.done.append((handle, self.worker.evaluate(params)))
-        return handle
-
-    def wait_one(self, timeout: float | None) -> list[Any]:
-        return [self.done[0][0]] if self.done else []
-
-    def result(self, handle: Any) -> tuple[str, Any, Any]:
-        _, outcome = self.done.popleft()
-        return outcome
-
-    def replace(self, worker: int) -> None:
-        self.worker = TrialWorker(self.factory)
-
-    def shutdown(self) -> None:
-        self.done.clear()
-
-
-class WorkerLost(Exception):
-    """The worker process died or stopped answering."""
-
-
-class _RayPool:
-    """W Ray actors, each a TrialWorker."""
-
-    def __init__(
-        self,
-        evaluator_factory: Callable[[], Evaluator],
-        workers: int,
-        num_cpus: float | None,
-        address: str | None,
-        scheduling: str = "default",
-    ) -> None:
-        import ray
-
-        from chronogym.ray_runtime import (
-            actor_scheduling,
-            ensure_ray,
-            resolve_worker_cpus,
-        )
-
-        placement = actor_scheduling(scheduling)
-        ensure_ray(address)
-        self.ray = ray
-        cpus = resolve_worker_cpus(num_cpus, workers)
-        self.actor_cls = ray.remote(TrialWorker).options(
-            num_cpus=cpus, max_restarts=0, max_task_retries=0, **placement
-        )
-        self.factory = evaluator_factory
-        self.actors = [self.actor_cls.remote(evaluator_factory) for _ in range(workers)]
-        ray.get([actor.ready.remote() for actor in self.actors])
-        self.inflight: dict[Any, int] = {}
-
-    def submit(self, worker: int, params: dict[str, Any]) -> Any:
-        ref = self.actors[worker].evaluate.remote(params)
-        self.inflight[ref] = worker
-        return ref
-
-    def wait_one(self, timeout: float | None) -> list[Any]:
-        ready, _ = self.ray.wait(list(self.inflight), num_returns=1, timeout=timeout)
-        return ready
-
-    def result(self, handle: Any) -> tuple[str, Any, Any]:
-        self.inflight.pop(handle, None)
-        try:
-            return self.ray.get(handle)
-        except self.ray.exceptions.RayError as error:
-            raise WorkerLost(f"{type(error).__name__}: {error}") from None
-
-    def forget(self, handle: Any) -> None:
-        self.inflight.pop(handle, None)
-
-    def replace(self, worker: int) -> None:
-        import contextlib
-
-        from chronogym.ray_runtime import start_with_retries
-
-        with contextlib.suppress(Exception):
-            self.ray.kill(self.actors[worker], no_restart=True)
-        self.actors[worker] = start_with_retries(
-            lambda: self.actor_cls.remote(self.factory),
-            lambda actor: self.ray.get(actor.ready.remote()),
-            (self.ray.exceptions.RayActorError,),
-        )
-
-    def pid(self, worker: int) -> int:
-        return self.ray.get(self.actors[worker].pid.remote())
-
-    def shutdown(self) -> None:
-        for actor in self.actors:
-            self.ray.kill(actor, no_restart=True)
-        self.actors = []
-
-
 @dataclass
-class _Inflight:
+class TrialJob:
+    """A trial handed to a worker: the Optuna trial, its parameters, and its retries so far."""
+
     trial: Any
     params: dict[str, Any]
     worker: int
-    attempt: int
-    started: float
+    attempt: int = 0
 
 
 def recover_stale_trials(study: Any) -> int:
@@ -262,115 +174,182 @@ def run_parallel_study(
             nodes as possible; see :class:`~chronogym.vector.RayVectorEnv`).
         max_retries: re-runs of a trial whose worker died. trial_timeout: seconds
             before a worker is considered hung.
-        pool_hook: called with the worker pool once started (fault-injection tests).
+        pool_hook: called with the worker pool (its vector backend) once started
+            (fault-injection tests).
     """
-    from tqdm import tqdm
-
-    _check_positive_int("n_trials", n_trials)
-    _check_positive_int("workers", workers)
-    if backend not in ("ray", "serial"):
-        raise ValueError(f"backend={backend!r}: expected 'ray' or 'serial'")
-    if backend == "serial" and workers != 1:
-        raise ValueError(f"workers={workers} with backend='serial'; expected workers=1")
-    if not isinstance(max_retries, int) or max_retries < 0:
-        raise ValueError(f"max_retries={max_retries!r}: expected an integer >= 0")
-    if trial_timeout is not None and not trial_timeout > 0:
-        raise ValueError(f"trial_timeout={trial_timeout!r}: expected None or seconds > 0")
-    from chronogym.ray_runtime import actor_scheduling
-
-    actor_scheduling(scheduling)  # validates it
-
+    _check_arguments(n_trials, workers, backend, max_retries, trial_timeout, scheduling)
     report = StudyReport(study.study_name)
     report.recovered = recover_stale_trials(study)
-    remaining = n_trials - finished_trials(study)
+    remaining = max(n_trials - finished_trials(study), 0)
     start = time.perf_counter()
-    pool: _Pool = (
-        _SerialPool(evaluator_factory)
-        if backend == "serial"
-        else _RayPool(evaluator_factory, workers, num_cpus, address, scheduling)
+    pool = _start_workers(
+        backend, evaluator_factory, workers, num_cpus, address, scheduling, trial_timeout
     )
     report.startup = time.perf_counter() - start
-    start = time.perf_counter()  # history and elapsed count from the first trial on
     if pool_hook is not None:
         pool_hook(pool)
     bar = tqdm(
         total=n_trials,
-        initial=n_trials - max(remaining, 0),
+        initial=n_trials - remaining,
         desc="trials",
         disable=not progress,
         dynamic_ncols=True,
     )
-    inflight: dict[Any, _Inflight] = {}
-    free = deque(range(workers))
-    to_ask = max(remaining, 0)
-
-    def record(job: _Inflight, status: str, payload: Any, attrs: Any) -> None:
-        """Tell the study a trial's final state and free its worker."""
-        if status == "ok":
-            for key, value in (attrs or {}).items():
-                job.trial.set_user_attr(key, value)
-            study.tell(job.trial, payload)
-            report.completed += 1
-        else:
-            _tell_fail(study, job.trial, payload)
-            report.failed += 1
-        free.append(job.worker)
-        best = _best_value(study)
-        value = payload if status == "ok" else None
-        report.history.append((time.perf_counter() - start, job.trial.number, value, best))
-        bar.update(1)
-        if best is not None:
-            bar.set_postfix_str(f"best J {best:.4g}")
-
-    def recover(job: _Inflight, reason: str) -> None:
-        """Replace a lost worker; retry its trial there, or record it failed."""
-        pool.replace(job.worker)
-        if job.attempt < max_retries:
-            report.retried += 1
-            job.attempt += 1
-            job.started = time.perf_counter()
-            inflight[pool.submit(job.worker, job.params)] = job
-        else:
-            record(job, "fail", f"worker lost {job.attempt + 1} times: {reason}", None)
-
+    run = StudyRun(
+        study,
+        suggest,
+        pool,
+        {"evaluator_factory": evaluator_factory},
+        report,
+        bar,
+        workers=workers,
+        max_retries=max_retries,
+        trial_timeout=trial_timeout,
+    )
     try:
-        while to_ask > 0 or inflight:
-            while free and to_ask > 0:
-                trial = study.ask()
-                params = suggest(trial)
-                worker = free.popleft()
-                handle = pool.submit(worker, params)
-                inflight[handle] = _Inflight(trial, params, worker, 0, time.perf_counter())
-                to_ask -= 1
-            ready = pool.wait_one(_next_timeout(inflight, trial_timeout))
-            if not ready:  # a trial ran past trial_timeout: its worker is hung
-                for handle, job in _overdue(inflight, trial_timeout):
-                    del inflight[handle]
-                    if hasattr(pool, "forget"):
-                        pool.forget(handle)
-                    recover(job, f"no result within trial_timeout={trial_timeout} s")
-                continue
-            for handle in ready:
-                job = inflight.pop(handle)
-                try:
-                    outcome = pool.result(handle)
-                except WorkerLost as lost:
-                    recover(job, str(lost))
-                else:
-                    record(job, *outcome)
+        run.run(remaining)
     finally:
         bar.close()
-        for job in inflight.values():  # interrupted: never leave trials RUNNING
-            _tell_fail(study, job.trial, "the run was interrupted before this trial finished")
+        run.fail_unfinished()  # interrupted: never leave trials RUNNING
         pool.shutdown()
-    report.elapsed = time.perf_counter() - start
+    report.elapsed = time.perf_counter() - run.start
     _fill_best(study, report)
     return report
 
 
-def _check_positive_int(name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{name}={value!r}: expected an integer >= 1")
+def _check_arguments(
+    n_trials: int,
+    workers: int,
+    backend: str,
+    max_retries: int,
+    trial_timeout: float | None,
+    scheduling: str,
+) -> None:
+    """Every argument check of run_parallel_study, before anything starts."""
+    check_int("n_trials", n_trials, low=1)
+    check_int("workers", workers, low=1)
+    if backend not in BACKENDS:
+        raise ValueError(f"backend={backend!r}: expected 'ray' or 'serial'")
+    if backend == "serial" and workers != 1:
+        raise ValueError(f"workers={workers} with backend='serial'; expected workers=1")
+    check_int("max_retries", max_retries, low=0)
+    if trial_timeout is not None:
+        check_positive("trial_timeout", trial_timeout, expected="None or seconds > 0")
+    actor_scheduling(scheduling)  # validates it
+
+
+def _start_workers(
+    backend: str,
+    evaluator_factory: Callable[[], Evaluator],
+    workers: int,
+    num_cpus: float | None,
+    address: str | None,
+    scheduling: str,
+    trial_timeout: float | None,
+) -> Backend:
+    """``workers`` TrialWorkers, started and ready: in this process, or Ray actors."""
+    kwargs = [{"evaluator_factory": evaluator_factory}] * workers
+    pool: Backend
+    if backend == "serial":
+        pool = LocalTrials()
+    else:
+        ensure_ray(address)
+        cpus = resolve_worker_cpus(num_cpus, workers)
+        # start_timeout None: building an evaluator may take long; trial_timeout bounds a trial
+        pool = TrialActors(cpus, 0, None, trial_timeout, scheduling=scheduling)
+    pool.start(kwargs)
+    return pool
+
+
+class StudyRun:
+    """One run of the ask/tell loop: trials to free workers, results told as they come."""
+
+    def __init__(
+        self,
+        study: Any,
+        suggest: Callable[[Any], dict[str, Any]],
+        pool: Backend,
+        worker_kwargs: dict[str, Any],
+        report: StudyReport,
+        bar: Any,
+        *,
+        workers: int,
+        max_retries: int,
+        trial_timeout: float | None,
+    ) -> None:
+        self.study = study
+        self.suggest = suggest
+        self.pool = pool
+        self.worker_kwargs = worker_kwargs  # a replacement worker is built from them
+        self.report = report
+        self.bar = bar
+        self.max_retries = max_retries
+        overdue = None
+        if trial_timeout is not None:
+            overdue = f"no result within trial_timeout={trial_timeout} s"
+        slices = [(w, w + 1) for w in range(workers)]  # one trial per worker
+        self.in_flight = InFlight(pool, slices, overdue_message=overdue)
+        self.jobs: dict[int, TrialJob] = {}  # worker -> the trial it evaluates
+        self.free = deque(range(workers))
+        self.start = time.perf_counter()  # history and elapsed count from the first trial on
+
+    def run(self, to_ask: int) -> None:
+        """Ask ``to_ask`` trials, keeping every worker busy, until all are told."""
+        while to_ask > 0 or self.jobs:
+            while self.free and to_ask > 0:
+                trial = self.study.ask()
+                params = self.suggest(trial)
+                self._submit(TrialJob(trial, params, self.free.popleft()))
+                to_ask -= 1
+            for worker, (_, outcome) in self.in_flight.collect(1, None).items():
+                self._answer(self.jobs.pop(worker), outcome)
+
+    def _submit(self, job: TrialJob) -> None:
+        self.jobs[job.worker] = job
+        self.in_flight.submit(CallKind.TRIAL, "evaluate", [job.worker], [(job.params,)])
+
+    def _answer(self, job: TrialJob, outcome: Outcome) -> None:
+        """A worker's answer; a lost (dead or hung) worker's trial is recovered."""
+        if outcome.ok:
+            self._record(job, *outcome.value)
+        else:
+            self._recover(job, outcome.error)
+
+    def _record(self, job: TrialJob, status: str, payload: Any, attrs: Any) -> None:
+        """Tell the study a trial's final state and free its worker."""
+        if status == "ok":
+            for key, value in (attrs or {}).items():
+                job.trial.set_user_attr(key, value)
+            self.study.tell(job.trial, payload)
+            self.report.completed += 1
+        else:
+            _tell_fail(self.study, job.trial, payload)
+            self.report.failed += 1
+        self.free.append(job.worker)
+        best = _best_value(self.study)
+        value = payload if status == "ok" else None
+        elapsed = time.perf_counter() - self.start
+        self.report.history.append((elapsed, job.trial.number, value, best))
+        self.bar.update(1)
+        if best is not None:
+            self.bar.set_postfix_str(f"best J {best:.4g}")
+
+    def _recover(self, job: TrialJob, reason: str) -> None:
+        """Replace a lost worker; retry its trial there, or record it failed."""
+        self.pool.replace(job.worker, self.worker_kwargs)
+        if job.attempt < self.max_retries:
+            self.report.retried += 1
+            job.attempt += 1
+            self._submit(job)
+        else:
+            self._record(job, "fail", f"worker lost {job.attempt + 1} times: {reason}", None)
+
+    def fail_unfinished(self) -> None:
+        """Tell FAIL for every trial still in flight (the run was interrupted)."""
+        for job in self.jobs.values():
+            _tell_fail(self.study, job.trial, "the run was interrupted before this trial finished")
+        self.jobs.clear()
+        self.in_flight.clear()
 
 
 def _tell_fail(study: Any, trial: Any, reason: str) -> None:
@@ -396,20 +375,3 @@ def _fill_best(study: Any, report: StudyReport) -> None:
     report.best_params = dict(best.params)
     report.best_attrs = dict(best.user_attrs)
     report.best_number = best.number
-
-
-def _next_timeout(inflight: dict[Any, _Inflight], trial_timeout: float | None) -> float | None:
-    if trial_timeout is None or not inflight:
-        return None
-    oldest = min(job.started for job in inflight.values())
-    return max(0.0, oldest + trial_timeout - time.perf_counter())
-
-
-def _overdue(
-    inflight: dict[Any, _Inflight], trial_timeout: float | None
-) -> list[tuple[Any, _Inflight]]:
-    """The in-flight trials that have run longer than ``trial_timeout``."""
-    if trial_timeout is None:
-        return []
-    now = time.perf_counter()
-    return [(h, job) for h, job in inflight.items() if now - job.started >= trial_timeout]

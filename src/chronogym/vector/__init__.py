@@ -2,6 +2,41 @@
 
 ``make_vec`` builds either of them (or Gymnasium's own); the errors of asynchronous
 stepping are ``EnvsInFlightError`` and ``RecvTimeoutError``.
+
+Life of a step -- ``RayVectorEnv.step(actions)`` with Box spaces and the default socket
+transport, hop by hop (file: function):
+
+1. ``worker_vector_env.py``: ``WorkerVectorEnv.step`` (RayVectorEnv and SerialVectorEnv
+   inherit it) -> ``_step_args`` checks the actions (``actions.py``:
+   ``prepare_box_action``) and cuts them into one byte slice per worker.
+2. ``worker_vector_env.py``: ``_call_all`` -> ``Backend.submit`` for every worker
+   (``backend.py`` defines the protocol). ``socket_transport.py``:
+   ``SocketBackend.submit`` writes a request (``wire_format.py``: ``REQUEST``) to the
+   worker's socket. Other backends: ``actor_transport.py``: ``ActorBackend.submit`` (a
+   Ray actor call); ``serial.py``: ``LocalBackend.submit`` (runs the call at once);
+   ``driver_worker.py``: ``DriverWorkerBackend.submit`` (the driver's own worker).
+3. In the worker, ``socket_transport.py``: ``_serve_conn`` reads the request
+   (``wire_format.py``: ``fill``) and calls ``group.py``: ``EnvGroup.step_packed`` ->
+   ``EnvGroup.step`` (Gymnasium's autoreset; an env that raised is rebuilt), which
+   returns a ``StepAnswer`` (``backend.py``); ``wire_format.py``: ``encode_answer``
+   turns it into the answer's bytes (infos as columns: ``infos.py``: ``to_columns``).
+4. Back in the driver, ``Backend.gather`` -> ``socket_transport.py``:
+   ``SocketBackend._read`` -> ``wire_format.py``: ``decode_answer``: one ``Outcome``
+   (``backend.py``) per worker, holding its ``StepAnswer`` or its error.
+5. ``worker_vector_env.py``: ``_step_result`` unpacks each answer, logs the envs
+   rebuilt inside workers, and replaces a lost worker (``_replace_worker`` ->
+   ``Backend.replace``), reporting its envs truncated.
+6. ``worker_vector_env.py``: ``_join_results`` joins the workers' parts
+   (``batching.py``: ``join_obs``; ``infos.py``: ``join_infos``).
+
+``send`` / ``recv`` (and ``step_async`` / ``step_wait``, ``async_reset``) take the same
+hops, except that the calls wait in ``in_flight.py``: ``InFlight.submit`` /
+``InFlight.collect`` (``Backend.wait``, then ``Backend.gather``) until enough envs
+have answered, and ``_pending_result`` reads each answer. The docs' "How it works"
+section of the vector envs guide (docs/guides/vector-envs.md) draws the same path.
+
+:mod:`chronogym.optim.parallel` runs its Optuna trials on the same machinery: an
+``ActorBackend`` (or ``LocalBackend``) of ``TrialWorker``s and an ``InFlight``.
 """
 
 from __future__ import annotations

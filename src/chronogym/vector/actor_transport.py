@@ -13,20 +13,21 @@ import traceback
 from typing import Any
 
 from chronogym.ray_runtime import actor_scheduling, start_with_retries
+from chronogym.vector.backend import Outcome, error_outcome
 from chronogym.vector.group import EnvGroup
-from chronogym.vector.wire import Outcome, error_outcome
 
 
 class ActorBackend:
     """One Ray actor per worker, each owning an EnvGroup for its whole life."""
 
-    worker_cls: type[EnvGroup] = EnvGroup  # what each actor holds
+    worker_cls: type = EnvGroup  # what each actor holds (an EnvGroup, or optim's TrialWorker)
+    builds = "its envs"  # what a worker builds as it starts (for the error when it fails)
 
     def __init__(
         self,
         num_cpus: float,
         num_gpus: float,
-        start_timeout: float,
+        start_timeout: float | None,
         step_timeout: float | None,
         scheduling: str = "default",
     ) -> None:
@@ -60,7 +61,9 @@ class ActorBackend:
         except ray.exceptions.RayActorError as error:
             for actor in actors:
                 ray.kill(actor)
-            raise RuntimeError(f"a Ray worker failed while building its envs:\n{error}") from None
+            raise RuntimeError(
+                f"a Ray worker failed while building {self.builds}:\n{error}"
+            ) from None
 
     def start(self, group_kwargs: list[dict[str, Any]]) -> None:
         actors = [self._actor_cls.remote(**kwargs) for kwargs in group_kwargs]

@@ -4,7 +4,7 @@ Everything goes through ``gymnasium.vector.utils`` (``batch_space``, ``iterate``
 ``concatenate``, ``create_empty_array``), as in Gymnasium's own vector envs, so
 every space type batches exactly as there. The one fast path: Box actions and
 observations travel between driver and workers as raw bytes (see
-:mod:`chronogym.vector.wire`), and their batches are joined with
+:mod:`chronogym.vector.wire_format`), and their batches are joined with
 ``np.concatenate``.
 """
 

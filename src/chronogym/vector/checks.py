@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from chronogym.validation import check_int, show
-from chronogym.vector.wire import EnvFactory
+from chronogym.vector.backend import EnvFactory
 
 
 def normalize_env_fns(

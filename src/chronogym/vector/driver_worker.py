@@ -21,8 +21,14 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
+from chronogym.vector.backend import (
+    Backend,
+    Outcome,
+    error_outcome,
+    gather_split,
+    split_handles,
+)
 from chronogym.vector.group import EnvGroup
-from chronogym.vector.wire import Backend, Outcome, error_outcome
 
 
 @dataclass
@@ -81,24 +87,13 @@ class DriverWorkerBackend:
         return call.outcome
 
     def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]:
-        outcomes: list[Outcome | None] = [
-            self._run(h) if isinstance(h, DeferredCall) else None for h in handles
-        ]
-        remote = [k for k, h in enumerate(handles) if not isinstance(h, DeferredCall)]
-        if remote:
-            gathered = self.remote.gather(
-                [workers[k] for k in remote], [handles[k] for k in remote]
-            )
-            for k, outcome in zip(remote, gathered, strict=True):
-                outcomes[k] = outcome
-        return outcomes  # type: ignore[return-value]
+        return gather_split(workers, handles, DeferredCall, self._run, self.remote.gather)
 
     def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]:
         """The driver's own calls run first (they are answered when they return)."""
-        local = [k for k, h in enumerate(handles) if isinstance(h, DeferredCall)]
+        local, remote = split_handles(handles, DeferredCall)
         for k in local:
             self._run(handles[k])
-        remote = [k for k, h in enumerate(handles) if not isinstance(h, DeferredCall)]
         if not remote:
             return local
         need = num_returns - len(local)

@@ -6,6 +6,11 @@ from typing import Any
 
 import gymnasium as gym
 
+import chronogym  # noqa: F401  (registers the chronogym/... ids)
+from chronogym.vector.ray_vector_env import RayVectorEnv
+from chronogym.vector.serial import SerialVectorEnv
+
+#: The ``backend`` names of make_vec (and of the SB3 adapter's make_sb3_vec_env).
 BACKENDS = ("ray", "serial", "sync", "async")
 
 
@@ -19,15 +24,9 @@ def make_vec(
     (for comparison). Other keyword arguments go to the vector env, except
     ``env_kwargs``, which go to ``gymnasium.make``.
     """
-    import chronogym  # noqa: F401  (registers the chronogym/... ids)
-
     if backend == "ray":
-        from chronogym.vector.ray_vector_env import RayVectorEnv
-
         return RayVectorEnv(env_id, num_envs, **kwargs)
     if backend == "serial":
-        from chronogym.vector.serial import SerialVectorEnv
-
         return SerialVectorEnv(env_id, num_envs, **kwargs)
     if backend in ("sync", "async"):
         env_kwargs = kwargs.pop("env_kwargs", None) or {}

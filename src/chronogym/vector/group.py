@@ -25,10 +25,11 @@ from gymnasium.envs.registration import EnvSpec
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import concatenate, create_empty_array
 
+import chronogym  # noqa: F401  (registers the chronogym/... ids that resolve_env_id looks up)
 from chronogym.errors import DisabledAutoresetError
 from chronogym.seeding import restart_seed
+from chronogym.vector.backend import EnvFactory, ResetAnswer, Restart, StepAnswer
 from chronogym.vector.infos import to_columns
-from chronogym.vector.wire import EnvFactory, Restart
 
 
 def locked(method: Callable[..., Any]) -> Callable[..., Any]:
@@ -49,8 +50,6 @@ def resolve_env_id(env_id: str) -> EnvSpec:
     (which the workers never run) is made the same way there. Raises Gymnasium's
     error for an unknown id at once, in the driver.
     """
-    import chronogym  # noqa: F401  (registers the chronogym/... ids)
-
     return gym.spec(env_id)
 
 
@@ -141,15 +140,13 @@ class EnvGroup:
         self.autoreset[:] = True
 
     @locked
-    def reset_restarted(
-        self, seeds: Sequence[int], last_obs: Sequence[Any]
-    ) -> tuple[Any, list[dict[str, Any]], list[Restart]]:
+    def reset_restarted(self, seeds: Sequence[int], last_obs: Sequence[Any]) -> ResetAnswer:
         """After the whole process was replaced (SAME_STEP): reset now with ``seeds``."""
         self.pending_seeds = list(seeds)
-        part, infos, restarts = self.reset([None] * len(self.envs), None)
-        for j, info in enumerate(infos):
-            infos[j] = {"final_obs": last_obs[j], "final_info": {}, **info}
-        return part, infos, restarts
+        answer = self.reset([None] * len(self.envs), None)
+        for j, info in enumerate(answer.infos):
+            answer.infos[j] = {"final_obs": last_obs[j], "final_info": {}, **info}
+        return answer
 
     # -- reset / step ------------------------------------------------------------------
     def _batch(self, items: list[Any]) -> Any:
@@ -172,7 +169,7 @@ class EnvGroup:
         seeds: Sequence[int | None],
         options: dict[str, Any] | None,
         mask: Sequence[bool] | None = None,
-    ) -> tuple[Any, list[dict[str, Any]], list[Restart]]:
+    ) -> ResetAnswer:
         """Reset the envs (those where ``mask`` is True); return per-env obs, infos, restarts."""
         infos: list[dict[str, Any]] = [{} for _ in self.envs]
         restarts: list[Restart] = []
@@ -188,12 +185,10 @@ class EnvGroup:
                 obs, info = self._reset_one(j, seeds[j], options)
             self.last_obs[j] = obs
             infos[j] = info
-        return list(self.last_obs), infos, restarts
+        return ResetAnswer(list(self.last_obs), infos, restarts)
 
     @locked
-    def step(
-        self, actions: Sequence[Any]
-    ) -> tuple[list[Any], np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]], list[Restart]]:
+    def step(self, actions: Sequence[Any]) -> StepAnswer:
         """Step every env with its action (one per env), autoresetting as Gymnasium does.
 
         Returns per-env observations, then rewards, terminations, truncations,
@@ -233,16 +228,16 @@ class EnvGroup:
         out = _as_array(rewards, np.float64), _as_array(terminations, np.bool_)
         flags = (*out, _as_array(truncations, np.bool_))
         self.autoreset = np.logical_or(flags[1], flags[2])
-        return list(self.last_obs), *flags, infos, restarts
+        return StepAnswer(list(self.last_obs), *flags, infos, restarts)
 
     @locked
-    def step_packed(self, action_bytes: bytes | memoryview, timed: bool = False) -> tuple:
+    def step_packed(self, action_bytes: bytes | memoryview, timed: bool = False) -> StepAnswer:
         """``step`` for Box spaces with raw bytes in and out (cheaper to send than arrays).
 
         Returns (obs, rewards, terminations, truncations) as bytes, then the
         infos (:func:`~chronogym.vector.infos.to_columns`: None when all are
         empty, else columns or per-env dicts) and the restarts (None when none). With
-        ``timed``, a 7th item: (seconds of (de)serialization, seconds in ``step``).
+        ``timed``, also ``timings``: (seconds of (de)serialization, seconds in ``step``).
         """
         start = time.perf_counter()
         space = self.single_action_space
@@ -252,20 +247,19 @@ class EnvGroup:
             .copy()
         )
         stepped = time.perf_counter()
-        obs, rewards, terminations, truncations, infos, restarts = self.step(actions)
+        result = self.step(actions)
         computed = time.perf_counter()
-        out = (
-            self._batch(obs).tobytes(),
-            rewards.tobytes(),
-            terminations.tobytes(),
-            truncations.tobytes(),
-            to_columns(infos),
-            restarts or None,
+        out = StepAnswer(
+            self._batch(result.obs).tobytes(),
+            result.rewards.tobytes(),
+            result.terminations.tobytes(),
+            result.truncations.tobytes(),
+            to_columns(result.infos),
+            result.restarts or None,
         )
-        if not timed:
-            return out
-        serde = stepped - start + time.perf_counter() - computed
-        return (*out, (serde, computed - stepped))
+        if timed:
+            out.timings = (stepped - start + time.perf_counter() - computed, computed - stepped)
+        return out
 
     def _restart_in_step(self, j: int) -> tuple[Any, dict[str, Any]]:
         final_obs = self.last_obs[j]

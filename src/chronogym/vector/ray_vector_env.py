@@ -19,14 +19,14 @@ from chronogym.ray_runtime import (
 )
 from chronogym.validation import check_bool, check_int, check_number
 from chronogym.vector.actor_transport import ActorBackend
+from chronogym.vector.backend import Backend, EnvFactory
 from chronogym.vector.checks import normalize_env_fns
-from chronogym.vector.driver import WorkerVectorEnv
 from chronogym.vector.driver_worker import DriverWorkerBackend
 from chronogym.vector.socket_transport import SocketBackend, check_spin_us
-from chronogym.vector.wire import Backend, EnvFactory
+from chronogym.vector.worker_vector_env import WorkerVectorEnv
 
-TRANSPORTS = ("socket", "actor")
-BACKENDS = {"socket": SocketBackend, "actor": ActorBackend}
+#: The ``transport`` names and the backend class of each.
+TRANSPORTS: dict[str, type[ActorBackend]] = {"socket": SocketBackend, "actor": ActorBackend}
 
 
 def default_transport() -> str:
@@ -40,7 +40,7 @@ def check_transport(transport: str | None) -> str:
         return default_transport()
     if transport not in TRANSPORTS:
         raise ValueError(
-            f"transport={transport!r}: expected one of {TRANSPORTS} ('socket': Unix sockets "
+            f"transport={transport!r}: expected one of {tuple(TRANSPORTS)} ('socket': Unix sockets "
             "to workers on this node; 'actor': Ray actor calls) or None (the default, "
             f"{default_transport()!r})"
         )
@@ -173,7 +173,7 @@ class RayVectorEnv(WorkerVectorEnv):
         self.num_cpus_per_worker = resolve_worker_cpus(num_cpus, max(num_actors, 1))
         self.num_gpus_per_worker = check_worker_gpus(num_gpus, max(num_actors, 1))
         self.driver_worker = driver_worker
-        backend: Backend = BACKENDS[transport](
+        backend: Backend = TRANSPORTS[transport](
             self.num_cpus_per_worker,
             self.num_gpus_per_worker,
             start_timeout,

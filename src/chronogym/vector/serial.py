@@ -9,26 +9,28 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
-from chronogym.vector.driver import WorkerVectorEnv
+from chronogym.validation import is_int
+from chronogym.vector.backend import EnvFactory, Outcome, error_outcome
 from chronogym.vector.group import EnvGroup
-from chronogym.vector.wire import EnvFactory, Outcome, error_outcome
+from chronogym.vector.worker_vector_env import WorkerVectorEnv
 
 
 class LocalBackend:
-    """EnvGroups held in this process; a call runs when it is submitted."""
+    """Workers (EnvGroups) held in this process; a call runs when it is submitted."""
 
     step_timeout = None  # a call here cannot hang apart from the driver
+    worker_cls: type = EnvGroup  # what each worker is (an EnvGroup, or optim's TrialWorker)
 
     def __init__(self) -> None:
-        self.groups: list[EnvGroup] = []
+        self.groups: list[Any] = []
 
     def start(self, group_kwargs: list[dict[str, Any]]) -> None:
-        self.groups = [EnvGroup(**kwargs) for kwargs in group_kwargs]
+        self.groups = [self.worker_cls(**kwargs) for kwargs in group_kwargs]
 
     def replace(self, worker: int, kwargs: dict[str, Any]) -> None:
         with contextlib.suppress(Exception):  # a broken group may fail to close
             self.groups[worker].close()
-        self.groups[worker] = EnvGroup(**kwargs)
+        self.groups[worker] = self.worker_cls(**kwargs)
 
     def submit(self, worker: int, method: str, *args: Any) -> Outcome:
         try:
@@ -71,7 +73,7 @@ class SerialVectorEnv(WorkerVectorEnv):
             env_fns,
             num_envs,
             backend=LocalBackend(),
-            envs_per_worker=count if isinstance(count, int) and count >= 1 else 1,
+            envs_per_worker=count if is_int(count) and count >= 1 else 1,
             autoreset_mode=autoreset_mode,
             max_restarts=max_restarts,
             invalid_action=invalid_action,

@@ -21,7 +21,7 @@ spinning, while dear steps and a driver that thinks between steps (a policy's
 forward pass) leave the cores to the workers. ``spin_us=0`` gives plain
 blocking reads (no CPU at all while waiting).
 
-Messages: the packed-step format of :mod:`chronogym.vector.wire`.
+Messages: the packed-step format of :mod:`chronogym.vector.wire_format`.
 
 Faults: EOF, a reset connection or ``step_timeout`` without an answer mark the
 worker lost; the driver replaces it as with the plain transport and the
@@ -46,11 +46,11 @@ from typing import Any
 
 from chronogym.validation import check_number
 from chronogym.vector.actor_transport import ActorBackend
+from chronogym.vector.backend import Outcome, gather_split
 from chronogym.vector.group import EnvGroup
-from chronogym.vector.wire import (
+from chronogym.vector.wire_format import (
     ANSWER,
     REQUEST,
-    Outcome,
     StepFailure,
     decode_answer,
     encode_answer,
@@ -360,15 +360,7 @@ class SocketBackend(ActorBackend):
         return True
 
     def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]:
-        refs = [(k, h) for k, h in enumerate(handles) if not isinstance(h, SockHandle)]
-        outcomes: list[Outcome | None] = [
-            self._resolve(h) if isinstance(h, SockHandle) else None for h in handles
-        ]
-        if refs:
-            plain = super().gather([workers[k] for k, _ in refs], [h for _, h in refs])
-            for (k, _), outcome in zip(refs, plain, strict=True):
-                outcomes[k] = outcome
-        return outcomes  # type: ignore[return-value]
+        return gather_split(workers, handles, SockHandle, self._resolve, super().gather)
 
     def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]:
         """Indices of ``handles`` that have answered: sockets by ``poll``, calls by ``ray.wait``."""

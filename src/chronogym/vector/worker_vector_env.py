@@ -1,4 +1,4 @@
-"""The driver side of chronogym's vector envs, shared by the Ray and the serial backends.
+"""WorkerVectorEnv: the driver side of chronogym's vector envs, shared by Ray and serial.
 
 The driver splits the batched action into one slice per worker, issues every
 worker's call, then waits once (one barrier per vector step) and joins the
@@ -9,7 +9,9 @@ reported as truncated with ``info["worker_restarted"] = True``.
 
 Besides that barrier, ``send`` / ``recv`` step subsets of whole workers without
 one (EnvPool-style), and ``step_async`` / ``step_wait`` split a full step the
-way Gymnasium's ``AsyncVectorEnv`` does; see :mod:`chronogym.vector.pending`, which holds them.
+way Gymnasium's ``AsyncVectorEnv`` does. They are methods of this class; the calls
+they leave in flight, and the waiting for their answers, are
+:class:`~chronogym.vector.in_flight.InFlight`'s.
 ``profile_steps()`` times the phases of each barrier step (off by default); see
 :mod:`chronogym.vector.profile`.
 """
@@ -19,6 +21,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,6 +39,14 @@ from chronogym.errors import (
     WorkerCrashLoopError,
 )
 from chronogym.seeding import restart_seed, vector_seeds
+from chronogym.vector.backend import (
+    Backend,
+    EnvFactory,
+    Outcome,
+    ResetAnswer,
+    Restart,
+    StepAnswer,
+)
 from chronogym.vector.batching import join_obs, rows_of, split_actions
 from chronogym.vector.checks import (
     check_env_ids,
@@ -47,21 +58,25 @@ from chronogym.vector.checks import (
     workers_of,
 )
 from chronogym.vector.group import resolve_env_id
-from chronogym.vector.infos import batch_infos, join_infos
-from chronogym.vector.pending import InFlight, PendingCall
+from chronogym.vector.in_flight import CallKind, InFlight, PendingCall
+from chronogym.vector.infos import InfoColumns, batch_infos, join_infos
 from chronogym.vector.profile import StepProfile, now
-from chronogym.vector.wire import (
-    Backend,
-    EnvFactory,
-    Outcome,
-    Restart,
-    StepPart,
-)
 
 logger = logging.getLogger("chronogym")
 
 #: Spaces whose batch of actions is one NumPy array (others batch to tuples or dicts).
 ARRAY_BATCHES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)
+
+
+@dataclass
+class StepPart:
+    """One worker's share of a step (or of an asynchronous reset), unpacked for joining."""
+
+    obs: Any
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    infos: InfoColumns | list[dict[str, Any]] | None  # None: every env's info is empty
 
 
 class WorkerVectorEnv(VectorEnv):
@@ -243,12 +258,11 @@ class WorkerVectorEnv(VectorEnv):
                 self._seed_roots[i] = s
         return seeds, options, mask
 
-    def _take_reset(self, w: int, value: tuple) -> list[dict[str, Any]]:
+    def _take_reset(self, w: int, answer: ResetAnswer) -> list[dict[str, Any]]:
         """Keep worker ``w``'s reset observations; return its envs' infos."""
-        part, infos, restarts = value
-        self._note_restarts(restarts)
-        self._last_parts[w] = part
-        return list(infos)
+        self._note_restarts(answer.restarts)
+        self._last_parts[w] = answer.obs
+        return list(answer.infos)
 
     def _reset_args(self, w: int, seeds: list, options: Any, mask: np.ndarray | None) -> tuple:
         lo, hi = self._slices[w]
@@ -293,7 +307,7 @@ class WorkerVectorEnv(VectorEnv):
         results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
         out = self._join_results(workers, results)
         marks.append(now())
-        timed = [o.value[6] for o in outcomes if o.ok and len(o.value) == 7]
+        timed = [o.value.timings for o in outcomes if o.ok and o.value.timings is not None]
         profile.add(marks, timed)
         return out
 
@@ -347,10 +361,10 @@ class WorkerVectorEnv(VectorEnv):
         lo, hi = self._slices[w]
         count = hi - lo
         if outcome.ok:
-            part, rew, term, trunc, infos, restarts = outcome.value[:6]
-            if self._packed:
-                part, rew, term, trunc = self._unpack(part, rew, term, trunc, count)
-            self._note_restarts(restarts or [])
+            answer: StepAnswer = outcome.value
+            part, rew, term, trunc = self._arrays(answer, count)
+            infos = answer.infos
+            self._note_restarts(answer.restarts or [])
         else:
             if isinstance(outcome.value, DisabledAutoresetError):
                 raise outcome.value
@@ -360,13 +374,16 @@ class WorkerVectorEnv(VectorEnv):
         self._last_parts[w] = part
         return StepPart(part, rew, term, trunc, infos)
 
-    def _unpack(self, obs: bytes, rew: bytes, term: bytes, trunc: bytes, count: int) -> tuple:
+    def _arrays(self, answer: StepAnswer, count: int) -> tuple:
+        """Obs, rewards, terminations and truncations of an answer (packed: from bytes)."""
+        if not self._packed:
+            return answer.obs, answer.rewards, answer.terminations, answer.truncations
         space = self.single_observation_space
         return (
-            np.frombuffer(obs, dtype=space.dtype).reshape(count, *space.shape),
-            np.frombuffer(rew, dtype=np.float64),
-            np.frombuffer(term, dtype=np.bool_),
-            np.frombuffer(trunc, dtype=np.bool_),
+            np.frombuffer(answer.obs, dtype=space.dtype).reshape(count, *space.shape),
+            np.frombuffer(answer.rewards, dtype=np.float64),
+            np.frombuffer(answer.terminations, dtype=np.bool_),
+            np.frombuffer(answer.truncations, dtype=np.bool_),
         )
 
     def _restart_during_step(self, w: int, error: str) -> tuple[Any, list[dict[str, Any]]]:
@@ -376,9 +393,9 @@ class WorkerVectorEnv(VectorEnv):
         seeds = self._replace_worker(w, error)
         flags = {"worker_restarted": True, "worker_error": error}
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
-            part, infos, restarts = self._call_one(w, "reset_restarted", seeds, last_rows)
-            self._note_restarts(restarts)
-            return part, [{**info, **flags} for info in infos]
+            answer = self._call_one(w, "reset_restarted", seeds, last_rows)
+            self._note_restarts(answer.restarts)
+            return answer.obs, [{**info, **flags} for info in answer.infos]
         self._call_one(w, "mark_restarted", seeds, last_rows)
         return last_part, [dict(flags) for _ in range(hi - lo)]
 
@@ -419,7 +436,7 @@ class WorkerVectorEnv(VectorEnv):
         if unreset:
             raise RuntimeError(f"send() to envs {unreset} before their first reset(); reset first")
         args = self._step_args(workers, actions, np.argsort(ids, kind="stable"))
-        self._in_flight.submit("step", self._step_method, workers, args)
+        self._in_flight.submit(CallKind.STEP, self._step_method, workers, args)
 
     def step_async(self, actions: Any) -> None:
         """Start stepping every env (Gymnasium ``AsyncVectorEnv`` semantics); see step_wait."""
@@ -432,7 +449,9 @@ class WorkerVectorEnv(VectorEnv):
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Wait for the step started by :meth:`step_async`; the same numbers as ``step``."""
         self._check_open()
-        if len(self._in_flight.calls) != self.num_workers or self._in_flight.kinds() != {"step"}:
+        if len(self._in_flight.calls) != self.num_workers or self._in_flight.kinds() != {
+            CallKind.STEP
+        }:
             raise NoAsyncCallError(
                 "step_wait() expects a step of every env in flight (from step_async()); envs "
                 f"in flight: {self.envs_in_flight.tolist()}",
@@ -457,7 +476,7 @@ class WorkerVectorEnv(VectorEnv):
         seeds, options, _ = self._prepare_reset(seed, options)
         workers = list(range(self.num_workers))
         args = [self._reset_args(w, seeds, options, None) for w in workers]
-        self._in_flight.submit("reset", "reset", workers, args)
+        self._in_flight.submit(CallKind.RESET, "reset", workers, args)
 
     def recv(
         self, min_envs: int | None = None, timeout: float | None = None
@@ -486,7 +505,7 @@ class WorkerVectorEnv(VectorEnv):
 
     def _pending_result(self, w: int, call: PendingCall, outcome: Outcome) -> StepPart:
         """A step's or a reset's part; a failed reset is redone on a replacement worker."""
-        if call.kind == "step":
+        if call.kind is CallKind.STEP:
             return self._step_result(w, outcome)
         while not outcome.ok:
             self._replace_worker(w, outcome.error)

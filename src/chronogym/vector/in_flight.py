@@ -2,8 +2,8 @@
 
 :class:`InFlight` knows only the backend and which envs each worker holds; the
 driver's ``send`` / ``recv`` / ``step_async`` / ``step_wait`` / ``async_reset``
-(:class:`~chronogym.vector.driver.WorkerVectorEnv`) decide what to send and what
-the answers mean. A call is always a whole worker's call: one remote call steps
+(:class:`~chronogym.vector.worker_vector_env.WorkerVectorEnv`) decide what to send
+and what the answers mean. A call is always a whole worker's call: one remote call steps
 every env that worker holds.
 """
 
@@ -12,19 +12,29 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import Enum
 from typing import Any
 
 import numpy as np
 
 from chronogym.errors import RecvTimeoutError
-from chronogym.vector.wire import Backend, Outcome
+from chronogym.vector.backend import Backend, Outcome
+
+
+class CallKind(Enum):
+    """What a call in flight does: a step (``send``, ``step_async``), a reset
+    (``async_reset``), or a trial of :mod:`chronogym.optim.parallel`."""
+
+    STEP = "step"
+    RESET = "reset"
+    TRIAL = "trial"
 
 
 @dataclass
 class PendingCall:
     """One worker's call in flight."""
 
-    kind: str  # "step" or "reset"
+    kind: CallKind
     handle: Any  # what Backend.submit returned
     submitted: float  # time.monotonic() at submission
     args: tuple[Any, ...]  # kept to redo a reset on a replacement worker
@@ -33,9 +43,17 @@ class PendingCall:
 class InFlight:
     """The calls in flight, at most one per worker, and the waiting for their answers."""
 
-    def __init__(self, backend: Backend, slices: Sequence[tuple[int, int]]) -> None:
+    def __init__(
+        self,
+        backend: Backend,
+        slices: Sequence[tuple[int, int]],
+        overdue_message: str | None = None,
+    ) -> None:
+        """``slices``: the envs ``(lo, hi)`` of each worker; ``overdue_message``: the error
+        of a call lost to the backend's ``step_timeout`` (default: one naming it)."""
         self._backend = backend
         self._slices = slices
+        self._overdue_message = overdue_message
         self.calls: dict[int, PendingCall] = {}  # worker -> its call in flight
 
     def __bool__(self) -> bool:
@@ -49,10 +67,10 @@ class InFlight:
         ids = [np.arange(*self._slices[w], dtype=np.int64) for w in sorted(self.calls)]
         return np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
 
-    def kinds(self) -> set[str]:
+    def kinds(self) -> set[CallKind]:
         return {call.kind for call in self.calls.values()}
 
-    def submit(self, kind: str, method: str, workers: list[int], args: list[tuple]) -> None:
+    def submit(self, kind: CallKind, method: str, workers: list[int], args: list[tuple]) -> None:
         """Send each of ``workers`` its call (``args`` in the same order)."""
         for w, a in zip(workers, args, strict=True):
             handle = self._backend.submit(w, method, *a)
@@ -86,7 +104,7 @@ class InFlight:
         answered = sorted(ready)
         gathered = self._backend.gather(answered, [self.calls[w].handle for w in answered])
         outcomes = dict(zip(answered, gathered, strict=True))
-        message = f"no answer within step_timeout={self._step_timeout} s"
+        message = self._overdue_message or f"no answer within step_timeout={self._step_timeout} s"
         outcomes.update({w: Outcome(False, None, message, lost=True) for w in overdue})
         return {w: (self.calls.pop(w), outcomes[w]) for w in sorted(outcomes)}
 

@@ -1,0 +1,78 @@
+"""The byte format of a packed step (Box spaces), as the socket transport sends it.
+
+Packed step (``EnvGroup.step_packed``): the request is the action bytes; the
+answer is a :class:`~chronogym.vector.backend.StepAnswer` whose obs, rewards,
+terminations and truncations are bytes, then the infos
+(:func:`~chronogym.vector.infos.to_columns`: None when all are empty, else
+columns or per-env dicts), the restarts (None when none) and, when the
+driver asked for timings, ``(serde_s, compute_s)``. On a socket, an answer is
+``<B 5I`` (status, then the lengths of obs, rewards, terminations, truncations
+and tail) + those parts; the tail is the pickled tuple ``(infos, restarts)`` (or
+``(infos, restarts, timings)``) when any of them is set, or a pickled
+:class:`StepFailure` (status 1). A request is ``<I B`` (action byte count, timed
+flag) + the action bytes.
+"""
+
+from __future__ import annotations
+
+import pickle
+import socket
+import struct
+from dataclasses import dataclass
+
+from chronogym.vector.backend import Outcome, StepAnswer, error_outcome
+
+REQUEST = struct.Struct("<IB")  # action byte count, timed flag
+ANSWER = struct.Struct("<BIIIII")  # status (0 ok, 1 failure), then 5 part lengths
+OK, FAILED = 0, 1
+
+
+@dataclass
+class StepFailure:
+    """A step that raised inside a worker, returned as a value (socket transport)."""
+
+    error: Exception
+    text: str
+
+
+def encode_answer(answer: StepAnswer | StepFailure) -> bytes:
+    """One answer of ``step_packed`` (or a StepFailure) as the bytes of an answer message."""
+    if isinstance(answer, StepFailure):
+        try:
+            tail = pickle.dumps(answer)
+        except Exception:  # an exception that cannot be pickled travels as its text
+            tail = pickle.dumps(StepFailure(RuntimeError(answer.text), answer.text))
+        return ANSWER.pack(FAILED, 0, 0, 0, 0, len(tail)) + tail
+    if answer.timings is None:
+        extra: tuple = (answer.infos, answer.restarts)
+    else:
+        extra = (answer.infos, answer.restarts, answer.timings)
+    tail = pickle.dumps(extra) if any(x is not None for x in extra) else b""
+    parts = (answer.obs, answer.rewards, answer.terminations, answer.truncations, tail)
+    return ANSWER.pack(OK, *(len(p) for p in parts)) + b"".join(parts)
+
+
+def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
+    """An answer message as the Outcome an actor call gives for the same answer."""
+    parts, at = [], ANSWER.size
+    for size in sizes:
+        parts.append(view[at : at + size])
+        at += size
+    if status == FAILED:
+        failure = pickle.loads(parts[4])  # trusted: own worker (a private socket)
+        return error_outcome(failure.error, failure.text)
+    obs, rewards, terminations, truncations, tail = parts
+    extra = pickle.loads(tail) if sizes[4] else (None, None)  # trusted: own worker
+    answer = StepAnswer(bytes(obs), bytes(rewards), bytes(terminations), bytes(truncations), *extra)
+    return Outcome(True, answer)
+
+
+def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
+    """Read into ``view`` from ``got`` until at least ``need`` bytes are in; the count.
+    EOFError when the peer closes first (both ends use it)."""
+    while got < need:
+        n = sock.recv_into(view[got:])
+        if n == 0:
+            raise EOFError(f"the peer closed its socket after {got} of {need} bytes")
+        got += n
+    return got
