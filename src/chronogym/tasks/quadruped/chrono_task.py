@@ -41,7 +41,14 @@ from chronogym.tasks.quadruped.chrono_model import (
     quat_from_matrix,
     quat_to_matrix,
 )
-from chronogym.tasks.quadruped.config import Go1TaskConfig, obs_group
+from chronogym.tasks.quadruped.config import (
+    OBS_ANG_VEL,
+    OBS_GRAVITY,
+    OBS_JOINT_POS,
+    OBS_JOINT_VEL,
+    Go1TaskConfig,
+)
+from chronogym.tasks.quadruped.engines import ENGINE_TERRAINS
 from chronogym.tasks.quadruped.model import (
     CAMERA_NAME,
     DEFAULT_JOINT_POS,
@@ -55,7 +62,7 @@ from chronogym.terrain.params import SoilParameters, soil_preset
 __all__ = ["CHRONO_PHYSICS_STEP", "CHRONO_TERRAINS", "ChronoGo1VelocityTask"]
 
 #: Ground under the Chrono Go1: a rigid box, or Chrono's SCMTerrain.
-CHRONO_TERRAINS: tuple[str, ...] = ("rigid", "scm")
+CHRONO_TERRAINS: tuple[str, ...] = ENGINE_TERRAINS["chrono"]
 #: Default (dt, k) per contact method on rigid ground, 50 Hz policy.
 CHRONO_PHYSICS_STEP: dict[str, tuple[float, int]] = {"nsc": (0.002, 10), "smc": (0.0005, 40)}
 #: Default (dt, k) on SCM (its soil forces are explicit). A rigid-trained policy at 0.5 m/s on
@@ -69,10 +76,6 @@ TRUNK_DOMAIN = ((0.0, 0.0, 0.0), (0.62, 0.40, 0.30))
 FOOT_CONTACT_FORCE = 1.0
 #: The trunk or a hip touches the ground when its contact force exceeds this [N].
 BASE_CONTACT_FORCE = 1.0
-_ANG_VEL = obs_group("base_ang_vel")
-_GRAVITY = obs_group("projected_gravity")
-_JOINT_POS = obs_group("joint_pos")
-_JOINT_VEL = obs_group("joint_vel")
 
 
 class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
@@ -243,10 +246,10 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         pos, rot = self.base_frame()
         omega = body_ang_vel(trunk)  # world frame
         v_origin = body_lin_vel(trunk) + np.cross(omega, pos - body_pos(trunk))
-        raw[_ANG_VEL] = rot.T @ omega
-        raw[_GRAVITY] = -rot[2]
-        raw[_JOINT_POS] = self.servos.angles() - DEFAULT_JOINT_POS
-        raw[_JOINT_VEL] = self.servos.rates()
+        raw[OBS_ANG_VEL] = rot.T @ omega
+        raw[OBS_GRAVITY] = -rot[2]
+        raw[OBS_JOINT_POS] = self.servos.angles() - DEFAULT_JOINT_POS
+        raw[OBS_JOINT_VEL] = self.servos.rates()
         self.base_lin_vel = rot.T @ v_origin
         self._base_z = float(pos[2])
 

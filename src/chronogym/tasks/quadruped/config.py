@@ -47,6 +47,18 @@ def obs_group(name: str) -> slice:
     return slice(start, stop)
 
 
+#: Each group's slice of the observation, for the code that reads or writes it (the task's
+#: engine hooks and reward terms): ``OBS_SLICES`` as ``slice`` objects.
+OBS_ANG_VEL = obs_group("base_ang_vel")
+OBS_GRAVITY = obs_group("projected_gravity")
+OBS_COMMAND = obs_group("command")
+OBS_JOINT_POS = obs_group("joint_pos")
+OBS_JOINT_VEL = obs_group("joint_vel")
+OBS_LAST_ACTION = obs_group("last_action")
+#: Index of the projected gravity's z component (``-1`` upright).
+OBS_GRAVITY_Z = OBS_SLICES["projected_gravity"][0] + 2
+
+
 def _check_range(name: str, bounds: tuple[float, float]) -> None:
     low, high = bounds
     if not (math.isfinite(low) and math.isfinite(high) and low <= high):

@@ -40,7 +40,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from chronogym.engines.mujoco import MujocoTask
-from chronogym.tasks.quadruped.config import Go1TaskConfig, obs_group
+from chronogym.tasks.quadruped.config import (
+    OBS_ANG_VEL,
+    OBS_GRAVITY,
+    OBS_JOINT_POS,
+    OBS_JOINT_VEL,
+    Go1TaskConfig,
+)
+from chronogym.tasks.quadruped.engines import ENGINE_TERRAINS
 from chronogym.tasks.quadruped.model import (
     BASE_BODY_NAME,
     CAMERA_NAME,
@@ -59,7 +66,7 @@ if TYPE_CHECKING:
 __all__ = ["PHYSICS_STEP", "REWARD_TERMS", "TERRAINS", "Go1VelocityTask"]
 
 #: Ground under the feet: the rigid floor, or SCM soil (``chronogym.terrain``) over it.
-TERRAINS: tuple[str, ...] = ("rigid", "soil")
+TERRAINS: tuple[str, ...] = ENGINE_TERRAINS["mujoco"]
 #: Default (dt, k) per terrain, 50 Hz policy either way. Rigid ground: 10 ms keeps the
 #: standing height and slope creep of 5 ms and 2 ms (``benchmarks/rl/quadruped_physics.py``).
 #: The soil's force law is explicit
@@ -67,10 +74,6 @@ TERRAINS: tuple[str, ...] = ("rigid", "soil")
 #: robot jitters down through the soil (and at 5 ms with a 10x softer soil the rigid policy
 #: fell in 3 of 4 episodes; at 2 ms it kept walking on "firm", as at 1 ms).
 PHYSICS_STEP: dict[str, tuple[float, int]] = {"rigid": (0.01, 2), "soil": (0.002, 10)}
-_ANG_VEL = obs_group("base_ang_vel")
-_GRAVITY = obs_group("projected_gravity")
-_JOINT_POS = obs_group("joint_pos")
-_JOINT_VEL = obs_group("joint_vel")
 
 
 class Go1VelocityTask(Go1VelocityBase, MujocoTask):
@@ -221,10 +224,10 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
         data = self.data
         mujoco.mju_quat2Mat(self._rot, data.qpos[3:7])
         rot = self._rot.reshape(3, 3)
-        raw[_ANG_VEL] = data.qvel[3:6]  # the free joint's angular velocity is in the body frame
-        raw[_GRAVITY] = -rot[2]  # R^T (0, 0, -1)
-        raw[_JOINT_POS] = data.qpos[7:] - DEFAULT_JOINT_POS
-        raw[_JOINT_VEL] = data.qvel[6:]
+        raw[OBS_ANG_VEL] = data.qvel[3:6]  # the free joint's angular velocity is in the body frame
+        raw[OBS_GRAVITY] = -rot[2]  # R^T (0, 0, -1)
+        raw[OBS_JOINT_POS] = data.qpos[7:] - DEFAULT_JOINT_POS
+        raw[OBS_JOINT_VEL] = data.qvel[6:]
         self.base_lin_vel = rot.T @ data.qvel[0:3]
 
     def _update_contacts(self) -> None:

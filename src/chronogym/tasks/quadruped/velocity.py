@@ -45,23 +45,22 @@ from gymnasium import spaces
 from chronogym.task import Task
 from chronogym.tasks.quadruped.config import (
     ACTION_DIM,
+    OBS_ANG_VEL,
+    OBS_COMMAND,
     OBS_DIM,
+    OBS_GRAVITY,
+    OBS_GRAVITY_Z,
+    OBS_JOINT_POS,
+    OBS_LAST_ACTION,
     OBS_SCALES,
     OBS_SLICES,
     Go1TaskConfig,
     RewardWeights,
-    obs_group,
 )
 from chronogym.tasks.quadruped.model import DEFAULT_JOINT_POS
 
 #: Reward terms in the order of ``RewardWeights``' fields (the task's term vector).
 REWARD_TERMS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RewardWeights))
-_ANG_VEL = obs_group("base_ang_vel")
-_GRAVITY = obs_group("projected_gravity")
-_GRAVITY_Z = OBS_SLICES["projected_gravity"][0] + 2
-_COMMAND = obs_group("command")
-_JOINT_POS = obs_group("joint_pos")
-_LAST_ACTION = obs_group("last_action")
 #: ``None`` given for these keywords means the field's default (as for ``Go1TaskConfig()``).
 _NONE_IS_DEFAULT = ("commands", "rewards")
 
@@ -299,8 +298,8 @@ class Go1VelocityBase(Task):
     def observe(self) -> np.ndarray:
         raw = self._obs_raw
         self._read_state(raw)
-        raw[_COMMAND] = self.command
-        raw[_LAST_ACTION] = self.last_action
+        raw[OBS_COMMAND] = self.command
+        raw[OBS_LAST_ACTION] = self.last_action
         return (raw * self._obs_scale).astype(np.float32)
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:
@@ -353,8 +352,8 @@ class Go1VelocityBase(Task):
         raw = self._obs_raw
         return BaseMotion(
             self.base_lin_vel.tolist(),
-            raw[_ANG_VEL].tolist(),
-            raw[_GRAVITY].tolist(),
+            raw[OBS_ANG_VEL].tolist(),
+            raw[OBS_GRAVITY].tolist(),
             self.command.tolist(),
         )
 
@@ -405,7 +404,7 @@ class Go1VelocityBase(Task):
 
     def _reward_joint_posture(self, motion: BaseMotion) -> float:
         """|q - q_default|^2."""
-        offsets = self._obs_raw[_JOINT_POS]
+        offsets = self._obs_raw[OBS_JOINT_POS]
         return offsets @ offsets
 
     def _reward_torques(self, motion: BaseMotion) -> float:
@@ -435,7 +434,7 @@ class Go1VelocityBase(Task):
         return float(speed2 @ self.feet_contact_now)
 
     def terminated(self, obs: np.ndarray) -> bool:
-        tilt = math.acos(min(1.0, max(-1.0, -self._obs_raw[_GRAVITY_Z])))
+        tilt = math.acos(min(1.0, max(-1.0, -self._obs_raw[OBS_GRAVITY_Z])))
         self._fell = tilt > self.config.max_tilt or self._base_contact
         return self._fell
 
