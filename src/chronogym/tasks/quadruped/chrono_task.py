@@ -58,6 +58,7 @@ from chronogym.tasks.quadruped.model import (
 )
 from chronogym.tasks.quadruped.velocity import Go1VelocityBase
 from chronogym.terrain.params import SoilParameters, soil_preset
+from chronogym.validation import check_number
 
 __all__ = ["CHRONO_PHYSICS_STEP", "CHRONO_TERRAINS", "ChronoGo1VelocityTask"]
 
@@ -103,7 +104,7 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         by name (``max_tilt=0.8``), replacing the value in ``config``. The rest are Chrono's:
         physics step ``dt`` x ``k`` (``None``: by contact method and terrain), the terrain with
         its soil, and the model's ``settings``."""
-        self._init_tracking(config, options)
+        super().__init__(config=config, **options)
         if terrain not in CHRONO_TERRAINS:
             raise ValueError(
                 f"terrain={terrain!r}: expected one of {', '.join(CHRONO_TERRAINS)} for the "
@@ -123,12 +124,14 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
                 "expected 'bullet' on rigid ground (on Chrono's multicore collision system a "
                 "foot went through the ground box); multicore is for terrain='scm'"
             )
-        if not (isinstance(soil_resolution, (int, float)) and 0.005 <= soil_resolution <= 0.1):
-            raise ValueError(
-                f"soil_resolution={soil_resolution!r}: expected a node spacing in [0.005, 0.1] m"
-            )
-        if not (isinstance(soil_extent, (int, float)) and 1.0 <= soil_extent <= 1000.0):
-            raise ValueError(f"soil_extent={soil_extent!r}: expected a side in [1, 1000] m")
+        check_number(
+            "soil_resolution",
+            soil_resolution,
+            low=0.005,
+            high=0.1,
+            expected="a node spacing in [0.005, 0.1] m",
+        )
+        check_number("soil_extent", soil_extent, low=1, high=1000, expected="a side in [1, 1000] m")
         self.soil_params = soil_preset(soil) if isinstance(soil, str) else soil
         if not isinstance(self.soil_params, SoilParameters):
             raise ValueError(f"soil={soil!r}: expected a SoilParameters or a preset name")
@@ -154,7 +157,7 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         )
         return self.robot.system
 
-    def setup(self) -> None:
+    def _setup_engine(self) -> None:
         import mujoco
 
         robot = self.robot
@@ -183,7 +186,6 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         self._calf_contact = [calf.GetContactForce for calf in robot.calves]
         self._fatal_contact = [body.GetContactForce for body in robot.fatal]
         self._torques = np.zeros(12)
-        self._setup_tracking()
 
     def _add_scm(self) -> Any:
         from chronogym.engines.chrono_scm import ChronoSCM

@@ -59,6 +59,7 @@ from chronogym.tasks.quadruped.model import (
 )
 from chronogym.tasks.quadruped.velocity import REWARD_TERMS, Go1VelocityBase
 from chronogym.terrain.params import SoilParameters, soil_preset
+from chronogym.validation import check_number
 
 if TYPE_CHECKING:
     from chronogym.terrain import MujocoSoil
@@ -99,9 +100,8 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
         by name (``max_tilt=0.8``), replacing the value in ``config``. The rest are MuJoCo's:
         physics step ``dt`` x ``k`` (``None``: ``PHYSICS_STEP`` of the terrain), friction
         ``cone`` and ``impratio``, and the terrain with its soil."""
-        self._init_tracking(config, options)
-        if not (isinstance(impratio, (int, float)) and math.isfinite(impratio) and impratio >= 1):
-            raise ValueError(f"impratio={impratio!r}: expected a float >= 1")
+        super().__init__(config=config, **options)
+        check_number("impratio", impratio, low=1, expected="a float >= 1")
         if terrain not in TERRAINS:
             raise ValueError(
                 f"terrain={terrain!r}: expected one of {', '.join(TERRAINS)} for the MuJoCo Go1"
@@ -111,12 +111,16 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
                     else ""
                 )
             )
-        if not (isinstance(soil_resolution, (int, float)) and 0.001 <= soil_resolution <= 0.1):
-            raise ValueError(
-                f"soil_resolution={soil_resolution!r}: expected a node spacing in [0.001, 0.1] m"
-            )
-        if not (isinstance(soil_window, (int, float)) and 0.5 <= soil_window <= 100):
-            raise ValueError(f"soil_window={soil_window!r}: expected a side length in [0.5, 100] m")
+        check_number(
+            "soil_resolution",
+            soil_resolution,
+            low=0.001,
+            high=0.1,
+            expected="a node spacing in [0.001, 0.1] m",
+        )
+        check_number(
+            "soil_window", soil_window, low=0.5, high=100, expected="a side length in [0.5, 100] m"
+        )
         if cone not in ("pyramidal", "elliptic"):
             raise ValueError(f"cone={cone!r}: expected 'pyramidal' or 'elliptic'")
         default_dt, default_k = PHYSICS_STEP[terrain]
@@ -152,7 +156,7 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
             model.actuator_biasprm[:, 2] = -kd
         return model
 
-    def setup(self) -> None:
+    def _setup_engine(self) -> None:
         model = self.model
         self._home_key = model.key(HOME_KEYFRAME).id
         self._trunk = model.body(BASE_BODY_NAME).id
@@ -169,7 +173,6 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
         for leg, geom in enumerate(self._foot_geoms.tolist()):
             self._geom_roles[geom] = leg + 1
         self._rot = np.zeros(9)
-        self._setup_tracking()
 
     def _add_soil(self) -> None:
         """SCM soil under the lower legs (calf capsule + foot sphere), in a window that
