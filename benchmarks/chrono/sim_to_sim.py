@@ -63,10 +63,10 @@ def evaluate_engine(
     """Summary rows and cost per env step of one configuration."""
     import gymnasium as gym
 
-    from chronogym.rl.evaluate import run_episode, summarize
-    from chronogym.rl.quadruped import check_engine
     from chronogym.rl.trainer import load_policy
     from chronogym.tasks.quadruped.chrono_model import ChronoGo1Settings
+    from chronogym.tasks.quadruped.engines import check_engine
+    from chronogym.tasks.quadruped.evaluation import run_episode, summarize
 
     engine, options = CONFIGS[config]
     terrain = options.get("terrain", "rigid")
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.episodes < 1 or not args.seconds > 0:
         parser.error(f"--episodes={args.episodes} --seconds={args.seconds}: expected >= 1, > 0")
     import chronogym  # noqa: F401  (registers the envs)
-    from chronogym.rl.evaluate import DEFAULT_COMMANDS
+    from chronogym.tasks.quadruped.evaluation import DEFAULT_COMMANDS
 
     commands = list(DEFAULT_COMMANDS)
     steps = round(args.seconds / 0.02)

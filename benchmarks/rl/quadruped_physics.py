@@ -160,8 +160,8 @@ def task_cost(env: SimEnv, targets: np.ndarray, repeats: int) -> tuple[float, fl
 
 def policy_across_steps(checkpoint: Path, rows: list[Row]) -> list[dict]:
     """The walking criterion's summary of ``checkpoint`` at each elliptic, impratio-100 step."""
-    from chronogym.rl.evaluate import WalkingCriterion, evaluate, summarize
     from chronogym.rl.trainer import load_policy
+    from chronogym.tasks.quadruped.evaluation import WalkingCriterion, evaluate, summarize
 
     criterion = WalkingCriterion()
     policy = load_policy(checkpoint)

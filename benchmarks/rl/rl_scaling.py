@@ -59,7 +59,7 @@ def run_config(
 ) -> dict:
     """Train one configuration (``train_kwargs`` go to ``train_quadruped``, e.g. ``resume``);
     its summary. Iterations and env steps count this run only, also when it resumes."""
-    from chronogym.rl.quadruped import QUADRUPED_PPO, train_quadruped
+    from chronogym.tasks.quadruped.training import QUADRUPED_PPO, train_quadruped
 
     backend, num_envs = parse_config(name)
     shutil.rmtree(runs / name, ignore_errors=True)  # a fresh progress.csv for the figure
@@ -210,7 +210,7 @@ def main() -> None:
     if args.finetune and args.resume is None:
         parser.error("--finetune: expected --resume CKPT too (fine-tuning needs a policy)")
     try:
-        from chronogym.rl.quadruped import check_engine
+        from chronogym.tasks.quadruped.engines import check_engine
 
         check_engine(args.engine)
     except (ValueError, ImportError) as error:

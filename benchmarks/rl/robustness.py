@@ -38,8 +38,8 @@ CONDITIONS: dict[str, tuple[float | None, float, tuple[float, float] | None]] = 
 
 
 def main(argv: list[str] | None = None) -> None:
-    from chronogym.rl.evaluate import WalkingCriterion
-    from chronogym.rl.quadruped import play_quadruped, play_randomization
+    from chronogym.tasks.quadruped.evaluation import WalkingCriterion
+    from chronogym.tasks.quadruped.play import play_quadruped, play_randomization
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("checkpoint", type=Path)

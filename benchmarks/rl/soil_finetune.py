@@ -46,7 +46,7 @@ def rigid_checkpoint(path: Path, minutes: float, seed: int) -> Path:
     """``path`` if it exists, else a rigid policy trained for ``minutes`` (serial, 32 envs)."""
     if path.is_file():
         return path
-    from chronogym.rl.quadruped import train_quadruped
+    from chronogym.tasks.quadruped.training import train_quadruped
 
     print(f"== no rigid checkpoint at {path}: training one for {minutes:g} min (serial, 32 envs)")
     result = train_quadruped(path.parent, num_envs=32, backend="serial", minutes=minutes, seed=seed)
@@ -55,7 +55,7 @@ def rigid_checkpoint(path: Path, minutes: float, seed: int) -> Path:
 
 def evaluate_on_soil(checkpoint: str | Path, episodes: int, seed: int) -> dict[str, float]:
     """Mean survival and x/y velocity MSE of the deterministic policy over ``EVAL_COMMANDS``."""
-    from chronogym.rl.quadruped import play_quadruped
+    from chronogym.tasks.quadruped.play import play_quadruped
 
     rows = play_quadruped(
         checkpoint, commands=EVAL_COMMANDS, episodes=episodes, seed=seed, terrain="soil",

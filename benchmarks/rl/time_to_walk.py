@@ -121,7 +121,7 @@ def train_run(
     ``budget``: ``{"env_steps": n}`` or ``{"minutes": m}``."""
     import shutil
 
-    from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
+    from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 
     c = parse_config(split_config(config)[0])
     ppo, task = variant_settings(config)
@@ -159,7 +159,7 @@ def check(env: Any, path: Path, criterion: Any) -> tuple[bool, int, float]:
     """Whether the checkpoint at ``path`` walks, the commands it passes in order, and the worst
     x/y MSE over the commands checked (stopping at the first that fails)."""
     from chronogym.rl.checkpoint import load_policy
-    from chronogym.rl.evaluate import check_walking
+    from chronogym.tasks.quadruped.evaluation import check_walking
 
     walks, summary = check_walking(env, load_policy(path), criterion)
     passed = sum(criterion.passes(r) for r in summary)
@@ -174,7 +174,7 @@ def evaluate_run(run: Path, criterion: Any, config: str) -> tuple[list[dict[str,
 
     import chronogym  # noqa: F401
     from chronogym.rl.best import read_best
-    from chronogym.rl.quadruped import ENV_ID
+    from chronogym.tasks.quadruped.engines import ENV_ID
 
     env = gym.make(ENV_ID, **parse_config(split_config(config)[0]).task_kwargs())
     rows = []
@@ -288,7 +288,7 @@ def medians(summary: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from chronogym.rl.evaluate import WalkingCriterion
+    from chronogym.tasks.quadruped.evaluation import WalkingCriterion
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--configs", nargs="+", default=["ray:32:0:48"])
@@ -365,7 +365,7 @@ def main(argv: list[str] | None = None) -> None:
 def ppo_settings(config: str) -> dict[str, Any]:
     """The PPO settings a configuration trains with (``quadruped_train_config``'s algorithm
     with the configuration's overrides, and the initial action noise)."""
-    from chronogym.rl.quadruped import quadruped_train_config
+    from chronogym.tasks.quadruped.training import quadruped_train_config
 
     cfg = quadruped_train_config(**variant_settings(config)[0])
     return {**cfg["algorithm"], "init_std": cfg["actor"]["distribution_cfg"]["init_std"]}

@@ -35,7 +35,7 @@ COLUMNS = (
 def run(backend: str, num_envs: int, threads: int | None, iterations: int) -> dict:
     import torch
 
-    from chronogym.rl.quadruped import train_quadruped
+    from chronogym.tasks.quadruped.training import train_quadruped
 
     count = threads if threads is not None else torch.get_num_threads()
     with tempfile.TemporaryDirectory() as out:

@@ -82,12 +82,12 @@ def measure(
     import torch
     from rsl_rl.runners import OnPolicyRunner
 
-    from chronogym.rl.quadruped import (
+    from chronogym.rl.vecenv import RslRlVecEnv
+    from chronogym.tasks.quadruped.training import (
         default_update_threads,
         make_quadruped_vec_env,
         quadruped_train_config,
     )
-    from chronogym.rl.vecenv import RslRlVecEnv
 
     extra = {"driver_worker": True} if driver_worker else {}
     vec = make_quadruped_vec_env(

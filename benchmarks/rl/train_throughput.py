@@ -38,7 +38,7 @@ OUT = RESULTS / "train_throughput.json"
 # Runs in the subprocess: train one configuration, print its per-iteration rows as JSON.
 TRAIN = r"""
 import csv, json, sys
-from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
+from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 backend, num_envs, lag, steps, task_kwargs, threads, iterations, out = json.loads(sys.argv[1])
 cfg = quadruped_train_config(**({"num_steps_per_env": steps} if steps else {}))
 result = train_quadruped(out, num_envs=num_envs, backend=backend, iterations=iterations,

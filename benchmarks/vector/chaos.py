@@ -227,9 +227,9 @@ class ChaosCounter(gym.vector.VectorWrapper):
 def chaos_training(cluster: Any, settings: Settings, seed: int, out: Path) -> dict[str, Any]:
     import csv
 
-    from chronogym.rl.quadruped import make_quadruped_vec_env, quadruped_train_config
     from chronogym.rl.trainer import train
     from chronogym.rl.vecenv import RslRlVecEnv
+    from chronogym.tasks.quadruped.training import make_quadruped_vec_env, quadruped_train_config
 
     vec = make_quadruped_vec_env(
         8,

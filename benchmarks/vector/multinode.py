@@ -94,7 +94,7 @@ def train_check(address: str, out: Path) -> dict[str, Any]:
 
     import torch
 
-    from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
+    from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 
     results = {}
     for backend, addr in (("ray", address), ("serial", None)):

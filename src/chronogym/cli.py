@@ -221,7 +221,8 @@ def cmd_optimize(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """Train the Go1 velocity tracker with PPO (RSL-RL) on Ray workers or serially."""
-    from chronogym.rl.quadruped import check_engine, train_quadruped
+    from chronogym.tasks.quadruped.engines import check_engine
+    from chronogym.tasks.quadruped.training import train_quadruped
 
     if args.iterations is None and args.minutes is None:
         raise UsageError("give --iterations I, --minutes M, or both")
@@ -284,8 +285,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_play(args: argparse.Namespace) -> int:
     """Roll a trained policy out for a set of commands; print tracking errors, save a video."""
-    from chronogym.rl.evaluate import format_summary
-    from chronogym.rl.quadruped import check_can_render, check_engine, play_quadruped
+    from chronogym.tasks.quadruped.engines import check_engine
+    from chronogym.tasks.quadruped.evaluation import format_summary
+    from chronogym.tasks.quadruped.play import check_can_render, play_quadruped
 
     randomization = play_randomization(args)
     if not os.path.exists(args.checkpoint):
@@ -352,7 +354,7 @@ def open_study(url: str, study_name: str, sampler: Any) -> Any:
 
 def play_randomization(args: argparse.Namespace) -> Any:
     """The ``DomainRandomization`` of ``play --push`` / ``--friction`` (None: neither)."""
-    from chronogym.rl.quadruped import play_randomization as randomization
+    from chronogym.tasks.quadruped.play import play_randomization as randomization
 
     friction = None
     if args.friction is not None:

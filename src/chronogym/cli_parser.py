@@ -12,10 +12,12 @@ import sys
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any, NoReturn
 
+from chronogym.tasks.quadruped.engines import ALL_TERRAINS, ENGINES
+
 DEFAULT_STORAGE = "sqlite:///chronogym-optuna.db"
-QUADRUPED_ENGINES = ["mujoco", "chrono"]
+QUADRUPED_ENGINES = list(ENGINES)
 QUADRUPED_ENGINE_HELP = "physics engine (chrono: needs PyChrono; a MuJoCo checkpoint runs there)"
-QUADRUPED_TERRAINS = ["rigid", "soil", "scm"]
+QUADRUPED_TERRAINS = list(ALL_TERRAINS)
 QUADRUPED_TERRAIN_HELP = (
     "rigid ground; soil: chronogym's SCM (engine mujoco); scm: Chrono's SCMTerrain (engine chrono)"
 )

@@ -119,7 +119,7 @@ def assert_same_rows(got_rows: list[dict], want_rows: list[dict]) -> None:
 def test_train_quadruped_on_the_cluster_matches_serial(cluster, tmp_path):
     import torch
 
-    from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
+    from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 
     def run(backend: str, address: str | None):
         cfg = quadruped_train_config(num_steps_per_env=16, save_interval=100)
@@ -151,9 +151,9 @@ def test_train_quadruped_on_the_cluster_matches_serial(cluster, tmp_path):
 def test_short_episodes_give_the_same_rewards_on_the_cluster(cluster, tmp_path):
     """8-step episodes, so progress.csv holds real episode rewards and tracking errors
     (the 1000-step episodes above never end in 2 short iterations: those columns are NaN)."""
-    from chronogym.rl.quadruped import make_quadruped_vec_env, quadruped_train_config
     from chronogym.rl.trainer import train
     from chronogym.rl.vecenv import RslRlVecEnv
+    from chronogym.tasks.quadruped.training import make_quadruped_vec_env, quadruped_train_config
 
     def run(backend: str, address: str | None) -> list[dict[str, float]]:
         extra = {"address": address} if address else {}

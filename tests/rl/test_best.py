@@ -15,7 +15,9 @@ pytest.importorskip("rsl_rl")
 
 import chronogym  # noqa: F401
 from chronogym.rl.best import BestCheckpoint
-from chronogym.rl.evaluate import (
+from chronogym.rl.progress import TIMING_COLUMNS
+from chronogym.tasks.quadruped.engines import ENV_ID
+from chronogym.tasks.quadruped.evaluation import (
     WalkingCriterion,
     WalkingEvaluator,
     WalkingScore,
@@ -23,8 +25,7 @@ from chronogym.rl.evaluate import (
     run_episodes_together,
     score_walking,
 )
-from chronogym.rl.progress import TIMING_COLUMNS
-from chronogym.rl.quadruped import ENV_ID, quadruped_train_config, train_quadruped
+from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 
 SHORT = {"max_episode_steps": 40}  # short episodes keep the evaluations cheap
 
@@ -199,7 +200,7 @@ def test_eval_episodes_must_be_a_count(tmp_path, bad):
 def test_a_checkpoint_resumes_with_the_critic_it_was_trained_with(
     tmp_path, monkeypatch, trained_with
 ):
-    from chronogym.rl import quadruped
+    from chronogym.tasks.quadruped import training as quadruped
 
     cfg = quadruped_train_config(num_steps_per_env=4, save_interval=1)
     common = dict(num_envs=2, backend="serial", train_cfg=cfg, eval_episodes=0, progress=False)

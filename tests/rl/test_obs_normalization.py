@@ -12,9 +12,9 @@ from tensordict import TensorDict
 
 from chronogym.rl.checkpoint import load_policy, read_checkpoint
 from chronogym.rl.progress import ProgressBar
-from chronogym.rl.quadruped import make_quadruped_vec_env, quadruped_train_config
 from chronogym.rl.trainer import Budget, Runner
 from chronogym.rl.vecenv import RslRlVecEnv
+from chronogym.tasks.quadruped.training import make_quadruped_vec_env, quadruped_train_config
 
 
 def test_play_gives_the_actions_of_the_training_process(tmp_path):

@@ -119,7 +119,7 @@ def test_bad_policy_lag_names_the_value(tmp_path, bad):
 
 
 def test_default_training_twice_gives_the_same_rows(ray_cluster, tmp_path):
-    from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
+    from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 
     small = {"hidden_dims": [16, 16]}
     tiny = quadruped_train_config(num_steps_per_env=6, actor=small, critic=small)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from chronogym.rl.quadruped import env_kwargs_for, make_quadruped_vec_env
+from chronogym.tasks.quadruped.engines import env_kwargs_for
 from chronogym.tasks.quadruped.task import PHYSICS_STEP
+from chronogym.tasks.quadruped.training import make_quadruped_vec_env
 
 
 def test_task_kwargs_reach_every_env():

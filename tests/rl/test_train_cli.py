@@ -74,7 +74,7 @@ def test_train_resume_and_play_on_the_serial_backend(tmp_path):
 
 
 def can_render() -> bool:
-    from chronogym.rl.quadruped import check_can_render
+    from chronogym.tasks.quadruped.play import check_can_render
 
     try:
         check_can_render()

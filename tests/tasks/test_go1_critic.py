@@ -46,8 +46,8 @@ def test_the_rsl_rl_adapter_feeds_it_to_the_critic():
     pytest.importorskip("rsl_rl")
     import torch
 
-    from chronogym.rl.quadruped import make_quadruped_vec_env
     from chronogym.rl.vecenv import RslRlVecEnv
+    from chronogym.tasks.quadruped.training import make_quadruped_vec_env
 
     env = RslRlVecEnv(make_quadruped_vec_env(2, "serial", task_kwargs={"privileged_critic": True}))
     try:

@@ -175,7 +175,7 @@ def test_run_episode_reports_errors_under_a_shorter_time_limit():
     (``chronogym play --steps``, ``sim_to_sim.py``): the errors come out the same."""
     import gymnasium as gym
 
-    from chronogym.rl.evaluate import run_episode
+    from chronogym.tasks.quadruped.evaluation import run_episode
 
     def policy(obs):
         return np.zeros(12, dtype=np.float32)

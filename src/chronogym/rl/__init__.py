@@ -30,14 +30,14 @@ _EXPORTS = {
     "train": "chronogym.rl.trainer",
     "TrainResult": "chronogym.rl.trainer",
     "load_policy": "chronogym.rl.checkpoint",
-    "make_quadruped_vec_env": "chronogym.rl.quadruped",
-    "train_quadruped": "chronogym.rl.quadruped",
-    "play_quadruped": "chronogym.rl.quadruped",
-    "quadruped_train_config": "chronogym.rl.quadruped",
-    "evaluate": "chronogym.rl.evaluate",
-    "VideoRecorder": "chronogym.rl.evaluate",
-    "WalkingCriterion": "chronogym.rl.evaluate",
-    "WalkingEvaluator": "chronogym.rl.evaluate",
+    "make_quadruped_vec_env": "chronogym.tasks.quadruped.training",
+    "train_quadruped": "chronogym.tasks.quadruped.training",
+    "play_quadruped": "chronogym.tasks.quadruped.play",
+    "quadruped_train_config": "chronogym.tasks.quadruped.training",
+    "evaluate": "chronogym.tasks.quadruped.evaluation",
+    "VideoRecorder": "chronogym.video",
+    "WalkingCriterion": "chronogym.tasks.quadruped.evaluation",
+    "WalkingEvaluator": "chronogym.tasks.quadruped.evaluation",
     "BestCheckpoint": "chronogym.rl.best",
 }
 
@@ -63,20 +63,16 @@ if TYPE_CHECKING:
     from chronogym.rl.best import BestCheckpoint
     from chronogym.rl.checkpoint import load_policy
     from chronogym.rl.config import FINETUNE_PPO, ppo_train_config
-    from chronogym.rl.evaluate import (
-        VideoRecorder,
-        WalkingCriterion,
-        WalkingEvaluator,
-        evaluate,
-    )
-    from chronogym.rl.quadruped import (
+    from chronogym.rl.trainer import TrainResult, train
+    from chronogym.rl.vecenv import RslRlVecEnv
+    from chronogym.tasks.quadruped.evaluation import WalkingCriterion, WalkingEvaluator, evaluate
+    from chronogym.tasks.quadruped.play import play_quadruped
+    from chronogym.tasks.quadruped.training import (
         make_quadruped_vec_env,
-        play_quadruped,
         quadruped_train_config,
         train_quadruped,
     )
-    from chronogym.rl.trainer import TrainResult, train
-    from chronogym.rl.vecenv import RslRlVecEnv
+    from chronogym.video import VideoRecorder
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

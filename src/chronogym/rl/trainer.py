@@ -171,7 +171,7 @@ def train(
     and per-iteration console block.
 
     ``evaluator``: scores every saved checkpoint (e.g. a
-    :class:`~chronogym.rl.evaluate.WalkingEvaluator`); the best so far is copied to
+    :class:`~chronogym.tasks.quadruped.evaluation.WalkingEvaluator`); the best so far is copied to
     ``best.pt``, why is written to ``best.json`` (:mod:`chronogym.rl.best`), and each score
     and the seconds it took fill their own ``progress.csv`` columns at the save points.
     """

@@ -28,7 +28,6 @@ same robot and a change to the MJCF reaches both:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,6 +43,7 @@ from chronogym.tasks.quadruped.model import (
     TORQUE_LIMITS,
     go1_xml_path,
 )
+from chronogym.validation import check_int, check_positive
 
 __all__ = [
     "CONTACT_METHODS",
@@ -124,22 +124,14 @@ class ChronoGo1Settings:
             "friction_damping",
             "limit_time_constant",
         ):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}={value!r}: expected a finite float > 0")
+            check_positive(name, getattr(self, name), expected="a finite float > 0")
         for name in ("envelope", "margin"):
             value = getattr(self, name)
-            if value is not None and not (
-                isinstance(value, (int, float)) and math.isfinite(value) and value > 0
-            ):
-                raise ValueError(f"{name}={value!r}: expected None or a finite float > 0")
-        mu = self.friction
-        if mu is not None and not (isinstance(mu, (int, float)) and math.isfinite(mu) and mu > 0):
-            raise ValueError(f"friction={self.friction!r}: expected None or a float > 0")
-        if not (isinstance(self.solver_iterations, int) and self.solver_iterations >= 1):
-            raise ValueError(
-                f"solver_iterations={self.solver_iterations!r}: expected an integer >= 1"
-            )
+            if value is not None:
+                check_positive(name, value, expected="None or a finite float > 0")
+        if self.friction is not None:
+            check_positive("friction", self.friction, expected="None or a float > 0")
+        check_int("solver_iterations", self.solver_iterations, low=1)
 
     def collision_margins(self, rigid_ground: bool) -> tuple[float, float]:
         """(envelope, margin) [m] for a Go1 on rigid ground or (``False``) on SCM soil."""
@@ -434,10 +426,10 @@ def _material(chrono: Any, friction: float, settings: ChronoGo1Settings) -> Any:
         material = chrono.ChContactMaterialNSC()
     else:
         material = chrono.ChContactMaterialSMC()
-        material.SetKn(settings.contact_stiffness)
-        material.SetGn(settings.contact_damping)
+        material.SetKn(float(settings.contact_stiffness))
+        material.SetGn(float(settings.contact_damping))
         material.SetKt(0.0)
-        material.SetGt(settings.friction_damping)
+        material.SetGt(float(settings.friction_damping))
     material.SetFriction(friction)
     material.SetRestitution(0.0)
     return material
@@ -455,7 +447,7 @@ def _new_system(chrono: Any, settings: ChronoGo1Settings, rigid_ground: bool) ->
     set_collision_system(chrono, system, settings.collision)
     if settings.contact == "nsc":
         system.SetSolverType(chrono.ChSolver.Type_BARZILAIBORWEIN)
-        system.GetSolver().AsIterative().SetMaxIterations(settings.solver_iterations)
+        system.GetSolver().AsIterative().SetMaxIterations(int(settings.solver_iterations))
     else:
         solver = chrono.ChSolverSparseLU()
         solver.LockSparsityPattern(True)  # penalty contacts add no rows

@@ -41,7 +41,14 @@ from chronogym.tasks.quadruped.chrono_model import (
     quat_from_matrix,
     quat_to_matrix,
 )
-from chronogym.tasks.quadruped.config import Go1TaskConfig, obs_group
+from chronogym.tasks.quadruped.config import (
+    OBS_ANG_VEL,
+    OBS_GRAVITY,
+    OBS_JOINT_POS,
+    OBS_JOINT_VEL,
+    Go1TaskConfig,
+)
+from chronogym.tasks.quadruped.engines import ENGINE_TERRAINS
 from chronogym.tasks.quadruped.model import (
     CAMERA_NAME,
     DEFAULT_JOINT_POS,
@@ -51,11 +58,12 @@ from chronogym.tasks.quadruped.model import (
 )
 from chronogym.tasks.quadruped.velocity import Go1VelocityBase
 from chronogym.terrain.params import SoilParameters, soil_preset
+from chronogym.validation import check_number
 
 __all__ = ["CHRONO_PHYSICS_STEP", "CHRONO_TERRAINS", "ChronoGo1VelocityTask"]
 
 #: Ground under the Chrono Go1: a rigid box, or Chrono's SCMTerrain.
-CHRONO_TERRAINS: tuple[str, ...] = ("rigid", "scm")
+CHRONO_TERRAINS: tuple[str, ...] = ENGINE_TERRAINS["chrono"]
 #: Default (dt, k) per contact method on rigid ground, 50 Hz policy.
 CHRONO_PHYSICS_STEP: dict[str, tuple[float, int]] = {"nsc": (0.002, 10), "smc": (0.0005, 40)}
 #: Default (dt, k) on SCM (its soil forces are explicit). A rigid-trained policy at 0.5 m/s on
@@ -69,10 +77,6 @@ TRUNK_DOMAIN = ((0.0, 0.0, 0.0), (0.62, 0.40, 0.30))
 FOOT_CONTACT_FORCE = 1.0
 #: The trunk or a hip touches the ground when its contact force exceeds this [N].
 BASE_CONTACT_FORCE = 1.0
-_ANG_VEL = obs_group("base_ang_vel")
-_GRAVITY = obs_group("projected_gravity")
-_JOINT_POS = obs_group("joint_pos")
-_JOINT_VEL = obs_group("joint_vel")
 
 
 class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
@@ -100,7 +104,7 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         by name (``max_tilt=0.8``), replacing the value in ``config``. The rest are Chrono's:
         physics step ``dt`` x ``k`` (``None``: by contact method and terrain), the terrain with
         its soil, and the model's ``settings``."""
-        self._init_tracking(config, options)
+        super().__init__(config=config, **options)
         if terrain not in CHRONO_TERRAINS:
             raise ValueError(
                 f"terrain={terrain!r}: expected one of {', '.join(CHRONO_TERRAINS)} for the "
@@ -120,12 +124,14 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
                 "expected 'bullet' on rigid ground (on Chrono's multicore collision system a "
                 "foot went through the ground box); multicore is for terrain='scm'"
             )
-        if not (isinstance(soil_resolution, (int, float)) and 0.005 <= soil_resolution <= 0.1):
-            raise ValueError(
-                f"soil_resolution={soil_resolution!r}: expected a node spacing in [0.005, 0.1] m"
-            )
-        if not (isinstance(soil_extent, (int, float)) and 1.0 <= soil_extent <= 1000.0):
-            raise ValueError(f"soil_extent={soil_extent!r}: expected a side in [1, 1000] m")
+        check_number(
+            "soil_resolution",
+            soil_resolution,
+            low=0.005,
+            high=0.1,
+            expected="a node spacing in [0.005, 0.1] m",
+        )
+        check_number("soil_extent", soil_extent, low=1, high=1000, expected="a side in [1, 1000] m")
         self.soil_params = soil_preset(soil) if isinstance(soil, str) else soil
         if not isinstance(self.soil_params, SoilParameters):
             raise ValueError(f"soil={soil!r}: expected a SoilParameters or a preset name")
@@ -151,7 +157,7 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         )
         return self.robot.system
 
-    def setup(self) -> None:
+    def _setup_engine(self) -> None:
         import mujoco
 
         robot = self.robot
@@ -180,7 +186,6 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         self._calf_contact = [calf.GetContactForce for calf in robot.calves]
         self._fatal_contact = [body.GetContactForce for body in robot.fatal]
         self._torques = np.zeros(12)
-        self._setup_tracking()
 
     def _add_scm(self) -> Any:
         from chronogym.engines.chrono_scm import ChronoSCM
@@ -243,10 +248,10 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         pos, rot = self.base_frame()
         omega = body_ang_vel(trunk)  # world frame
         v_origin = body_lin_vel(trunk) + np.cross(omega, pos - body_pos(trunk))
-        raw[_ANG_VEL] = rot.T @ omega
-        raw[_GRAVITY] = -rot[2]
-        raw[_JOINT_POS] = self.servos.angles() - DEFAULT_JOINT_POS
-        raw[_JOINT_VEL] = self.servos.rates()
+        raw[OBS_ANG_VEL] = rot.T @ omega
+        raw[OBS_GRAVITY] = -rot[2]
+        raw[OBS_JOINT_POS] = self.servos.angles() - DEFAULT_JOINT_POS
+        raw[OBS_JOINT_VEL] = self.servos.rates()
         self.base_lin_vel = rot.T @ v_origin
         self._base_z = float(pos[2])
 

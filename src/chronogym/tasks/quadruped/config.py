@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from chronogym.tasks.quadruped.model import HOME_BASE_HEIGHT
-from chronogym.validation import check_positive, is_number
+from chronogym.validation import check_bool, check_int, check_number, check_positive, is_number
 
 #: Scale of each observation group (observation = raw value x scale).
 OBS_SCALES: dict[str, float | tuple[float, float, float]] = {
@@ -45,6 +45,18 @@ def obs_group(name: str) -> slice:
     """The slice of observation group ``name`` (an ``OBS_SLICES`` key) in the 45-vector."""
     start, stop = OBS_SLICES[name]
     return slice(start, stop)
+
+
+#: Each group's slice of the observation, for the code that reads or writes it (the task's
+#: engine hooks and reward terms): ``OBS_SLICES`` as ``slice`` objects.
+OBS_ANG_VEL = obs_group("base_ang_vel")
+OBS_GRAVITY = obs_group("projected_gravity")
+OBS_COMMAND = obs_group("command")
+OBS_JOINT_POS = obs_group("joint_pos")
+OBS_JOINT_VEL = obs_group("joint_vel")
+OBS_LAST_ACTION = obs_group("last_action")
+#: Index of the projected gravity's z component (``-1`` upright).
+OBS_GRAVITY_Z = OBS_SLICES["projected_gravity"][0] + 2
 
 
 def _check_range(name: str, bounds: tuple[float, float]) -> None:
@@ -82,10 +94,8 @@ class CommandRanges:
             check_positive("resample_s", self.resample_s, expected="None or seconds > 0")
         for name in ("single_axis_share", "standing_share"):
             value = getattr(self, name)
-            if not (_is_number(value) and 0 <= value <= 1):
-                raise ValueError(f"{name}={value!r}: expected a probability in [0, 1]")
-        if not (_is_number(self.zero_below) and self.zero_below >= 0):
-            raise ValueError(f"zero_below={self.zero_below!r}: expected a speed >= 0 in m/s")
+            check_number(name, value, low=0, high=1, expected="a probability in [0, 1]")
+        check_number("zero_below", self.zero_below, low=0, expected="a speed >= 0 in m/s")
 
     def shape(self, command: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Apply the single-axis, standing and dead-zone rules to a drawn ``command`` (in
@@ -124,10 +134,9 @@ class RewardWeights:
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
             value = getattr(self, field.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
+            if not is_number(value):
                 raise ValueError(f"{field.name}={value!r}: expected a float weight")
-            if not math.isfinite(value):
-                raise ValueError(f"{field.name}={value!r}: expected a finite weight")
+            check_number(field.name, value, expected="a finite weight")
 
     def active(self) -> dict[str, float]:
         """Name -> weight of the terms with a non-zero weight."""
@@ -165,14 +174,31 @@ class DomainRandomization:
             raise ValueError(f"push_velocity={self.push_velocity!r}: expected >= 0")
 
 
-def _is_number(value: Any) -> bool:
-    return is_number(value) and math.isfinite(value)
-
-
 def _check_type(name: str, value: Any, kind: type, optional: bool = False) -> None:
+    """A ValueError naming ``name`` unless ``value`` is a ``kind`` (or, if ``optional``, None)."""
     if not (isinstance(value, kind) or (optional and value is None)):
         expected = f"None or a {kind.__name__}" if optional else f"a {kind.__name__}"
         raise ValueError(f"{name}={value!r}: expected {expected}")
+
+
+#: The ``Go1TaskConfig`` fields that must be finite floats > 0.
+_POSITIVE_FIELDS = (
+    "action_scale",
+    "action_clip",
+    "max_tilt",
+    "base_height_target",
+    "tracking_sigma",
+)
+_AIR_TIME_RANGE = "in [0, 5) s"
+
+
+def _check_flag(name: str, value: Any) -> None:
+    """:func:`~chronogym.validation.check_bool`, raising a ValueError as every other bad
+    ``Go1TaskConfig`` field does (the message is the same)."""
+    try:
+        check_bool(name, value)
+    except TypeError as error:
+        raise ValueError(str(error)) from None
 
 
 @dataclass(frozen=True)
@@ -227,36 +253,32 @@ class Go1TaskConfig:
     kd: float | None = 0.5
 
     def __post_init__(self) -> None:
-        steps = self.max_episode_steps
-        if steps is not None and (
-            isinstance(steps, (bool, np.bool_))
-            or not isinstance(steps, (int, np.integer))
-            or steps < 1
-        ):
-            raise ValueError(f"max_episode_steps={steps!r}: expected None or an integer >= 1")
+        if self.max_episode_steps is not None:
+            check_int(
+                "max_episode_steps",
+                self.max_episode_steps,
+                low=1,
+                expected="None or an integer >= 1",
+            )
         _check_type("commands", self.commands, CommandRanges)
         _check_type("rewards", self.rewards, RewardWeights)
         _check_type("randomization", self.randomization, DomainRandomization, optional=True)
-        for name in (
-            "action_scale",
-            "action_clip",
-            "max_tilt",
-            "base_height_target",
-            "tracking_sigma",
-        ):
-            value = getattr(self, name)
-            if not (_is_number(value) and value > 0):
-                raise ValueError(f"{name}={value!r}: expected a finite float > 0")
+        for name in _POSITIVE_FIELDS:
+            check_positive(name, getattr(self, name), expected="a finite float > 0")
         for name in ("kp", "kd"):
             value = getattr(self, name)
-            if value is not None and not (_is_number(value) and value >= 0):
-                raise ValueError(f"{name}={value!r}: expected None (the model's) or a float >= 0")
-        threshold = self.air_time_threshold
-        if not (_is_number(threshold) and 0 <= threshold < 5):
-            raise ValueError(f"air_time_threshold={threshold!r}: expected in [0, 5) s")
-        noise = self.reset_joint_noise
-        if not (_is_number(noise) and 0 <= noise <= 0.5):
-            raise ValueError(f"reset_joint_noise={noise!r}: expected in [0, 0.5] rad")
+            if value is not None:
+                check_number(name, value, low=0, expected="None (the model's) or a float >= 0")
+        threshold = check_number(
+            "air_time_threshold", self.air_time_threshold, low=0, expected=_AIR_TIME_RANGE
+        )
+        if threshold >= 5:
+            raise ValueError(
+                f"air_time_threshold={self.air_time_threshold!r}: expected {_AIR_TIME_RANGE}"
+            )
+        check_number(
+            "reset_joint_noise", self.reset_joint_noise, low=0, high=0.5, expected="in [0, 0.5] rad"
+        )
         if self.reset_joint_scale is not None:
             _check_range("reset_joint_scale", self.reset_joint_scale)
             low, high = self.reset_joint_scale
@@ -265,14 +287,8 @@ class Go1TaskConfig:
                     f"reset_joint_scale={self.reset_joint_scale!r}: expected None or "
                     "(low, high) within [0, 2]"
                 )
-        velocity = self.reset_base_velocity
-        if not (_is_number(velocity) and 0 <= velocity <= 2):
-            raise ValueError(f"reset_base_velocity={velocity!r}: expected in [0, 2] m/s")
-        if not isinstance(self.privileged_critic, (bool, np.bool_)):
-            raise ValueError(
-                f"privileged_critic={self.privileged_critic!r}: expected True or False"
-            )
-        if not isinstance(self.only_positive_rewards, (bool, np.bool_)):
-            raise ValueError(
-                f"only_positive_rewards={self.only_positive_rewards!r}: expected True or False"
-            )
+        check_number(
+            "reset_base_velocity", self.reset_base_velocity, low=0, high=2, expected="in [0, 2] m/s"
+        )
+        _check_flag("privileged_critic", self.privileged_critic)
+        _check_flag("only_positive_rewards", self.only_positive_rewards)

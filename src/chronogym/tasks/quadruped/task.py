@@ -40,7 +40,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from chronogym.engines.mujoco import MujocoTask
-from chronogym.tasks.quadruped.config import Go1TaskConfig, obs_group
+from chronogym.tasks.quadruped.config import (
+    OBS_ANG_VEL,
+    OBS_GRAVITY,
+    OBS_JOINT_POS,
+    OBS_JOINT_VEL,
+    Go1TaskConfig,
+)
+from chronogym.tasks.quadruped.engines import ENGINE_TERRAINS
 from chronogym.tasks.quadruped.model import (
     BASE_BODY_NAME,
     CAMERA_NAME,
@@ -52,6 +59,7 @@ from chronogym.tasks.quadruped.model import (
 )
 from chronogym.tasks.quadruped.velocity import REWARD_TERMS, Go1VelocityBase
 from chronogym.terrain.params import SoilParameters, soil_preset
+from chronogym.validation import check_number
 
 if TYPE_CHECKING:
     from chronogym.terrain import MujocoSoil
@@ -59,7 +67,7 @@ if TYPE_CHECKING:
 __all__ = ["PHYSICS_STEP", "REWARD_TERMS", "TERRAINS", "Go1VelocityTask"]
 
 #: Ground under the feet: the rigid floor, or SCM soil (``chronogym.terrain``) over it.
-TERRAINS: tuple[str, ...] = ("rigid", "soil")
+TERRAINS: tuple[str, ...] = ENGINE_TERRAINS["mujoco"]
 #: Default (dt, k) per terrain, 50 Hz policy either way. Rigid ground: 10 ms keeps the
 #: standing height and slope creep of 5 ms and 2 ms (``benchmarks/rl/quadruped_physics.py``).
 #: The soil's force law is explicit
@@ -67,10 +75,6 @@ TERRAINS: tuple[str, ...] = ("rigid", "soil")
 #: robot jitters down through the soil (and at 5 ms with a 10x softer soil the rigid policy
 #: fell in 3 of 4 episodes; at 2 ms it kept walking on "firm", as at 1 ms).
 PHYSICS_STEP: dict[str, tuple[float, int]] = {"rigid": (0.01, 2), "soil": (0.002, 10)}
-_ANG_VEL = obs_group("base_ang_vel")
-_GRAVITY = obs_group("projected_gravity")
-_JOINT_POS = obs_group("joint_pos")
-_JOINT_VEL = obs_group("joint_vel")
 
 
 class Go1VelocityTask(Go1VelocityBase, MujocoTask):
@@ -96,9 +100,8 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
         by name (``max_tilt=0.8``), replacing the value in ``config``. The rest are MuJoCo's:
         physics step ``dt`` x ``k`` (``None``: ``PHYSICS_STEP`` of the terrain), friction
         ``cone`` and ``impratio``, and the terrain with its soil."""
-        self._init_tracking(config, options)
-        if not (isinstance(impratio, (int, float)) and math.isfinite(impratio) and impratio >= 1):
-            raise ValueError(f"impratio={impratio!r}: expected a float >= 1")
+        super().__init__(config=config, **options)
+        check_number("impratio", impratio, low=1, expected="a float >= 1")
         if terrain not in TERRAINS:
             raise ValueError(
                 f"terrain={terrain!r}: expected one of {', '.join(TERRAINS)} for the MuJoCo Go1"
@@ -108,12 +111,16 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
                     else ""
                 )
             )
-        if not (isinstance(soil_resolution, (int, float)) and 0.001 <= soil_resolution <= 0.1):
-            raise ValueError(
-                f"soil_resolution={soil_resolution!r}: expected a node spacing in [0.001, 0.1] m"
-            )
-        if not (isinstance(soil_window, (int, float)) and 0.5 <= soil_window <= 100):
-            raise ValueError(f"soil_window={soil_window!r}: expected a side length in [0.5, 100] m")
+        check_number(
+            "soil_resolution",
+            soil_resolution,
+            low=0.001,
+            high=0.1,
+            expected="a node spacing in [0.001, 0.1] m",
+        )
+        check_number(
+            "soil_window", soil_window, low=0.5, high=100, expected="a side length in [0.5, 100] m"
+        )
         if cone not in ("pyramidal", "elliptic"):
             raise ValueError(f"cone={cone!r}: expected 'pyramidal' or 'elliptic'")
         default_dt, default_k = PHYSICS_STEP[terrain]
@@ -149,7 +156,7 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
             model.actuator_biasprm[:, 2] = -kd
         return model
 
-    def setup(self) -> None:
+    def _setup_engine(self) -> None:
         model = self.model
         self._home_key = model.key(HOME_KEYFRAME).id
         self._trunk = model.body(BASE_BODY_NAME).id
@@ -166,7 +173,6 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
         for leg, geom in enumerate(self._foot_geoms.tolist()):
             self._geom_roles[geom] = leg + 1
         self._rot = np.zeros(9)
-        self._setup_tracking()
 
     def _add_soil(self) -> None:
         """SCM soil under the lower legs (calf capsule + foot sphere), in a window that
@@ -221,10 +227,10 @@ class Go1VelocityTask(Go1VelocityBase, MujocoTask):
         data = self.data
         mujoco.mju_quat2Mat(self._rot, data.qpos[3:7])
         rot = self._rot.reshape(3, 3)
-        raw[_ANG_VEL] = data.qvel[3:6]  # the free joint's angular velocity is in the body frame
-        raw[_GRAVITY] = -rot[2]  # R^T (0, 0, -1)
-        raw[_JOINT_POS] = data.qpos[7:] - DEFAULT_JOINT_POS
-        raw[_JOINT_VEL] = data.qvel[6:]
+        raw[OBS_ANG_VEL] = data.qvel[3:6]  # the free joint's angular velocity is in the body frame
+        raw[OBS_GRAVITY] = -rot[2]  # R^T (0, 0, -1)
+        raw[OBS_JOINT_POS] = data.qpos[7:] - DEFAULT_JOINT_POS
+        raw[OBS_JOINT_VEL] = data.qvel[6:]
         self.base_lin_vel = rot.T @ data.qvel[0:3]
 
     def _update_contacts(self) -> None:

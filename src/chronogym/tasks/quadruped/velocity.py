@@ -4,16 +4,18 @@
 (:mod:`.chrono_task`) share, so both engines run the same interface, settings
 (:class:`~.config.Go1TaskConfig`), observation scales, reward terms, command sampling, pushes
 and termination, by the same code. An engine subclass reads and writes its simulation through
-a few hooks:
+a few hooks, abstract methods of the base that each engine must implement:
 
 ===========================  =================================================================
+``_setup_engine()``           once the simulation exists: the engine's ids, contact bookkeeping
+                              and buffers (before the shared spaces and buffers)
 ``_reset_pose(yaw, joints)``  put the robot at rest at its home height, heading ``yaw``, with
                               these joint angles (``None``: the home pose) and servo targets
                               at the home pose; leave the state current
-``_read_state(raw)``          fill the ``base_ang_vel``, ``projected_gravity`` (body frame),
-                              ``joint_pos`` (offsets from the home pose) and ``joint_vel``
-                              groups of ``raw`` (``obs_group``); set ``self.base_lin_vel``
-                              (body frame)
+``_read_state(raw)``          fill the ``OBS_ANG_VEL``, ``OBS_GRAVITY`` (body frame),
+                              ``OBS_JOINT_POS`` (offsets from the home pose) and
+                              ``OBS_JOINT_VEL`` groups of ``raw`` (:mod:`.config`); set
+                              ``self.base_lin_vel`` (body frame)
 ``_set_joint_targets(q)``     the servo targets (rad, joint order FR, FL, RR, RL)
 ``_kick_base(dv)``            add ``dv`` (m/s, world x and y) to the base velocity
 ``_update_contacts()``        set ``self.feet_contact_now`` (4 bools) and ``self._base_contact``
@@ -24,9 +26,16 @@ a few hooks:
 ``_set_added_base_mass(dm)``  trunk mass = nominal + ``dm`` (domain randomization)
 ===========================  =================================================================
 
+Settings and setup: the base's ``__init__`` stores the shared settings (an engine's
+``__init__`` starts with ``super().__init__(config=config, **options)``, then checks its own
+arguments); the base's ``setup()`` runs the engine's ``_setup_engine()`` once the simulation
+exists and then makes the spaces and buffers both engines share, so no engine calls the
+shared setup itself.
+
 Reward: each ``RewardWeights`` field names a method ``_reward_<field>(motion)`` that computes
-the term's unweighted value from the current state and changes nothing. ``reward()`` sums the
-weighted terms, and then, in one place, carries the step over to the next: the episode's sums
+the term's unweighted value from the current state and changes nothing; ``_reward_functions``
+lists them all by name, in ``REWARD_TERMS`` order. ``reward()`` sums the weighted terms, and
+then, in one place, carries the step over to the next: the episode's sums
 (``_record_episode``), the feet's air time, contact memory and slip reference positions
 (``_update_feet_state``).
 """
@@ -36,6 +45,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -45,23 +55,22 @@ from gymnasium import spaces
 from chronogym.task import Task
 from chronogym.tasks.quadruped.config import (
     ACTION_DIM,
+    OBS_ANG_VEL,
+    OBS_COMMAND,
     OBS_DIM,
+    OBS_GRAVITY,
+    OBS_GRAVITY_Z,
+    OBS_JOINT_POS,
+    OBS_LAST_ACTION,
     OBS_SCALES,
     OBS_SLICES,
     Go1TaskConfig,
     RewardWeights,
-    obs_group,
 )
 from chronogym.tasks.quadruped.model import DEFAULT_JOINT_POS
 
 #: Reward terms in the order of ``RewardWeights``' fields (the task's term vector).
 REWARD_TERMS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RewardWeights))
-_ANG_VEL = obs_group("base_ang_vel")
-_GRAVITY = obs_group("projected_gravity")
-_GRAVITY_Z = OBS_SLICES["projected_gravity"][0] + 2
-_COMMAND = obs_group("command")
-_JOINT_POS = obs_group("joint_pos")
-_LAST_ACTION = obs_group("last_action")
 #: ``None`` given for these keywords means the field's default (as for ``Go1TaskConfig()``).
 _NONE_IS_DEFAULT = ("commands", "rewards")
 
@@ -122,10 +131,11 @@ class BaseMotion(NamedTuple):
     command: list[float]  # (vx, vy, yaw rate) commanded
 
 
-RewardTerm = Callable[["Go1VelocityBase", BaseMotion], float]
+#: One reward term of a task: its unweighted value for the motion of the step.
+RewardTerm = Callable[[BaseMotion], float]
 
 
-class Go1VelocityBase(Task):
+class Go1VelocityBase(Task, ABC):
     """Go1 tracking a velocity command, for any engine: see the module docstring."""
 
     #: The settings shared by both engines (``Go1TaskConfig``).
@@ -134,14 +144,21 @@ class Go1VelocityBase(Task):
     action_scale = _config_field("action_scale")
     base_height_target = _config_field("base_height_target")
 
-    def _init_tracking(self, config: Go1TaskConfig | None, options: dict[str, Any]) -> None:
+    def __init__(self, *, config: Go1TaskConfig | None = None, **options: Any) -> None:
         """Store the settings both engines share: ``config`` with ``options`` (keyword
         arguments named as ``Go1TaskConfig`` fields) replacing its fields."""
+        super().__init__()
         self.config = _task_config(type(self), config, options)
         self.max_episode_steps = self.config.max_episode_steps  # SimEnv writes the one in force
 
+    def setup(self) -> None:
+        """Once the simulation exists: the engine's ids and buffers (``_setup_engine``), then
+        the spaces and buffers both engines share (``_setup_tracking``)."""
+        self._setup_engine()
+        self._setup_tracking()
+
     def _setup_tracking(self) -> None:
-        """Spaces and buffers; call once the simulation exists (in ``setup``)."""
+        """Spaces and buffers both engines share (``setup``, after the engine's own)."""
         config = self.config
         self.observation_space = spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
         self.action_space = spaces.Box(
@@ -160,8 +177,9 @@ class Go1VelocityBase(Task):
         weights = dataclasses.asdict(config.rewards)
         self._term_weights = np.array([weights[n] for n in REWARD_TERMS]) * self.control_dt
         self._active_terms = [(i, n) for i, n in enumerate(REWARD_TERMS) if weights[n] != 0]
-        self._term_methods: list[tuple[int, RewardTerm]] = [
-            (i, getattr(type(self), f"_reward_{name}")) for i, name in self._active_terms
+        functions = self._reward_functions()
+        self._term_functions: list[tuple[int, RewardTerm]] = [
+            (i, functions[name]) for i, name in self._active_terms
         ]
         self._slip_on = weights["feet_slip"] != 0  # skip the foot-velocity work when off
         self._raw = np.zeros(len(REWARD_TERMS))
@@ -175,39 +193,56 @@ class Go1VelocityBase(Task):
 
     # --- engine hooks ----------------------------------------------------------------------
 
+    @abstractmethod
+    def _setup_engine(self) -> None:
+        """Once the simulation exists, before the shared spaces and buffers: the engine's ids,
+        contact bookkeeping and buffers (``setup`` calls it)."""
+
+    @abstractmethod
     def _reset_pose(self, yaw: float, joints: np.ndarray | None) -> None:
-        raise NotImplementedError
+        """Put the robot at rest at its home height, heading ``yaw``, with these joint angles
+        (``None``: the home pose) and servo targets at the home pose; leave the state current."""
 
+    @abstractmethod
     def _read_state(self, raw: np.ndarray) -> None:
-        raise NotImplementedError
+        """Fill the ``OBS_ANG_VEL``, ``OBS_GRAVITY`` (body frame), ``OBS_JOINT_POS`` (offsets
+        from the home pose) and ``OBS_JOINT_VEL`` groups of ``raw``; set ``self.base_lin_vel``
+        (body frame)."""
 
+    @abstractmethod
     def _set_joint_targets(self, targets: np.ndarray) -> None:
-        raise NotImplementedError
+        """The servo targets (rad, joint order FR, FL, RR, RL)."""
 
+    @abstractmethod
     def _kick_base(self, dv: np.ndarray) -> None:
-        raise NotImplementedError
+        """Add ``dv`` (m/s, world x and y) to the base velocity."""
 
+    @abstractmethod
     def _update_contacts(self) -> None:
-        raise NotImplementedError
+        """Set ``self.feet_contact_now`` (4 bools) and ``self._base_contact``."""
 
+    @abstractmethod
     def _joint_torques(self) -> np.ndarray:
-        raise NotImplementedError
+        """The 12 servo torques of the last tick (N m)."""
 
+    @abstractmethod
     def _base_height(self) -> float:
-        raise NotImplementedError
+        """The height of the base frame's origin (m)."""
 
+    @abstractmethod
     def feet_positions(self) -> np.ndarray:
         """World positions of the four foot centres, (4, 3) [m], leg order FR, FL, RR, RL."""
-        raise NotImplementedError
 
     def _feet_xy(self) -> np.ndarray:
         return self.feet_positions()[:, :2]
 
+    @abstractmethod
     def _set_friction(self, mu: float) -> None:
-        raise NotImplementedError
+        """Foot-ground friction coefficient (domain randomization)."""
 
+    @abstractmethod
     def _set_added_base_mass(self, dm: float) -> None:
-        raise NotImplementedError
+        """Trunk mass = nominal + ``dm`` (domain randomization)."""
 
     # --- reset -----------------------------------------------------------------------------
 
@@ -299,8 +334,8 @@ class Go1VelocityBase(Task):
     def observe(self) -> np.ndarray:
         raw = self._obs_raw
         self._read_state(raw)
-        raw[_COMMAND] = self.command
-        raw[_LAST_ACTION] = self.last_action
+        raw[OBS_COMMAND] = self.command
+        raw[OBS_LAST_ACTION] = self.last_action
         return (raw * self._obs_scale).astype(np.float32)
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:
@@ -353,17 +388,34 @@ class Go1VelocityBase(Task):
         raw = self._obs_raw
         return BaseMotion(
             self.base_lin_vel.tolist(),
-            raw[_ANG_VEL].tolist(),
-            raw[_GRAVITY].tolist(),
+            raw[OBS_ANG_VEL].tolist(),
+            raw[OBS_GRAVITY].tolist(),
             self.command.tolist(),
         )
 
     def _raw_terms(self, motion: BaseMotion, out: np.ndarray) -> np.ndarray:
         """Unweighted value of each active term, written into ``out`` at its ``REWARD_TERMS``
         index (inactive terms are left as they are)."""
-        for index, term in self._term_methods:
-            out[index] = term(self, motion)
+        for index, term in self._term_functions:
+            out[index] = term(motion)
         return out
+
+    def _reward_functions(self) -> dict[str, RewardTerm]:
+        """Every reward term by its ``RewardWeights`` field, in ``REWARD_TERMS`` order (the
+        order of the term vector ``reward()`` sums)."""
+        return {
+            "tracking_lin_vel": self._reward_tracking_lin_vel,
+            "tracking_ang_vel": self._reward_tracking_ang_vel,
+            "lin_vel_z": self._reward_lin_vel_z,
+            "ang_vel_xy": self._reward_ang_vel_xy,
+            "orientation": self._reward_orientation,
+            "base_height": self._reward_base_height,
+            "action_rate": self._reward_action_rate,
+            "joint_posture": self._reward_joint_posture,
+            "torques": self._reward_torques,
+            "feet_air_time": self._reward_feet_air_time,
+            "feet_slip": self._reward_feet_slip,
+        }
 
     # --- reward terms: one per RewardWeights field, unweighted, without side effects --------
 
@@ -405,7 +457,7 @@ class Go1VelocityBase(Task):
 
     def _reward_joint_posture(self, motion: BaseMotion) -> float:
         """|q - q_default|^2."""
-        offsets = self._obs_raw[_JOINT_POS]
+        offsets = self._obs_raw[OBS_JOINT_POS]
         return offsets @ offsets
 
     def _reward_torques(self, motion: BaseMotion) -> float:
@@ -435,7 +487,7 @@ class Go1VelocityBase(Task):
         return float(speed2 @ self.feet_contact_now)
 
     def terminated(self, obs: np.ndarray) -> bool:
-        tilt = math.acos(min(1.0, max(-1.0, -self._obs_raw[_GRAVITY_Z])))
+        tilt = math.acos(min(1.0, max(-1.0, -self._obs_raw[OBS_GRAVITY_Z])))
         self._fell = tilt > self.config.max_tilt or self._base_contact
         return self._fell
 
