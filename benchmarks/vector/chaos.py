@@ -1,7 +1,7 @@
 """Chaos under load: SIGKILL Ray workers (and a whole node) during PPO training and a
 lander study on a 3-node loopback cluster, then prove that nothing was lost.
 
-The cluster is ``chronogym.cluster.LocalCluster`` (head + 2 worker nodes, 1 CPU each,
+The cluster is ``chronogym.testing.LocalCluster`` (head + 2 worker nodes, 1 CPU each,
 ``ray start`` subprocesses). A killer thread with its own seeded RNG picks a random
 worker process of *this* cluster (``ray::SocketWorker`` or ``ray::EnvGroup`` during
 training, ``ray::TrialWorker`` during the study; other Ray clusters on the machine are never
@@ -439,7 +439,7 @@ def main() -> int:
     args = parser.parse_args()
     settings = SHORT if args.short else FULL
 
-    from chronogym.cluster import LocalCluster
+    from chronogym.testing import LocalCluster
 
     with tempfile.TemporaryDirectory() as tmp, LocalCluster(workers=2, num_cpus=1) as cluster:
         cluster.connect()

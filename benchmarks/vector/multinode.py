@@ -1,6 +1,6 @@
 """RayVectorEnv on one Ray node vs a 3-node loopback cluster, and the equality checks.
 
-Both clusters are started with ``chronogym.cluster.LocalCluster`` (``ray start``
+Both clusters are started with ``chronogym.testing.LocalCluster`` (``ray start``
 subprocesses) with the same total CPUs: one node with 3 CPUs, or a head and two
 worker nodes with 1 CPU each. On them it times Go1 env-steps/s of RayVectorEnv
 (3 workers, one per CPU) and checks that
@@ -160,7 +160,7 @@ def lander_check(address: str, out: Path) -> dict[str, Any]:
 
 
 def run_cluster(label: str, workers: int, head_cpus: int, steps: int, checks: bool) -> dict:
-    from chronogym.cluster import LocalCluster
+    from chronogym.testing import LocalCluster
 
     started = time.perf_counter()
     with LocalCluster(workers=workers, num_cpus=1, head_cpus=head_cpus) as cluster:

@@ -160,11 +160,6 @@ class SoilGrid:
         """The initial surface heights, ``(nx, ny)`` (read-only)."""
         return self.interior(self._reset_level)
 
-    @property
-    def plastic_level(self) -> np.ndarray:
-        """Surface height once unloaded (``level0 - plastic``), ``(nx, ny)`` copy."""
-        return self.interior(self.level0) - self.interior(self.plastic)
-
     def shift(self, di: int, dj: int) -> int:
         """Move the window by ``(di, dj)`` nodes; returns the change of a node's flat index.
 
