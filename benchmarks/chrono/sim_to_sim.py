@@ -8,23 +8,30 @@ MSEs over ``--episodes`` episodes (seeds 0, 1, ...), and each engine's cost per 
 wall time of ``env.step``, the policy excluded). Needs PyChrono for the Chrono column.
 Prints a table and writes ``results/sim_to_sim.json`` and a PNG.
 
-    python benchmarks/chrono/sim_to_sim.py runs/time_to_walk/ray-32-0-48-s0/model_819.pt
-    python benchmarks/chrono/sim_to_sim.py CKPT --configs mujoco-soil chrono-scm \
+    python -m benchmarks.chrono.sim_to_sim runs/time_to_walk/ray-32-0-48-s0/model_819.pt
+    python -m benchmarks.chrono.sim_to_sim CKPT --configs mujoco-soil chrono-scm \
         --out benchmarks/results/sim_to_sim_soil.json
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    pyplot,
+    save_figure,
+    settings,
+    table,
+    write_json,
+)
 
 OUT = RESULTS / "sim_to_sim.json"
 #: Configurations: engine and task arguments. Rigid ground: the MuJoCo task and the Chrono task

@@ -10,11 +10,11 @@ summary, and prints time-to-target ratios.
 Wall-clock counts from the first trial (worker start-up is reported apart). The target J
 is the worst of the final best values of all constant-liar runs, so every run reaches it.
 
-    python benchmarks/lander/bo_scaling.py                  # W in {1, 2, 4, 8}, 2 seeds, rigid
-    python benchmarks/lander/bo_scaling.py --quick          # smoke run
-    python benchmarks/lander/bo_scaling.py --terrain rigid rough --seeds 3 --address auto
-    python benchmarks/lander/bo_scaling.py --terrain soil   # SCM soil: ~2 s a landing (rigid 0.3)
-    python benchmarks/lander/bo_scaling.py --engine chrono --terrain scm --workers 1 2 --seeds 1 \
+    python -m benchmarks.lander.bo_scaling                  # W in {1, 2, 4, 8}, 2 seeds, rigid
+    python -m benchmarks.lander.bo_scaling --quick          # smoke run
+    python -m benchmarks.lander.bo_scaling --terrain rigid rough --seeds 3 --address auto
+    python -m benchmarks.lander.bo_scaling --terrain soil   # SCM soil: ~2 s a landing (rigid 0.3)
+    python -m benchmarks.lander.bo_scaling --engine chrono --terrain scm --workers 1 2 --seeds 1 \
         --trials 16 --skip-liar-check --out-dir benchmarks/results/bo_scaling_chrono_scm
         # Chrono's SCMTerrain (needs PyChrono with its vehicle module): ~16 s a landing
 """
@@ -32,8 +32,16 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    pyplot,
+    save_figure,
+    settings,
+    table,
+    write_json,
+)
 
 DEFAULT_OUT = RESULTS
 

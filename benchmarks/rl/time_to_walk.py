@@ -16,10 +16,10 @@ steps; per run: env steps and minutes to walk, best and last checkpoint), ``time
 (every checkpoint checked) and ``time_to_walk.png`` (commands passed and worst MSE against
 env steps, one line per run).
 
-    python benchmarks/rl/time_to_walk.py                      # the default, seeds 0-4
-    python benchmarks/rl/time_to_walk.py --configs ray:32:0:48+ent1e-3 --seeds 1 2 --keep
-    python benchmarks/rl/time_to_walk.py --evaluate-only --keep   # re-check the runs there
-    python benchmarks/rl/time_to_walk.py --merge /tmp/a /tmp/b --keep   # invocations run apart
+    python -m benchmarks.rl.time_to_walk                      # the default, seeds 0-4
+    python -m benchmarks.rl.time_to_walk --configs ray:32:0:48+ent1e-3 --seeds 1 2 --keep
+    python -m benchmarks.rl.time_to_walk --evaluate-only --keep   # re-check the runs there
+    python -m benchmarks.rl.time_to_walk --merge /tmp/a /tmp/b --keep   # invocations run apart
 
 A configuration is as in ``train_throughput.py``
 (``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``)
@@ -41,13 +41,11 @@ import csv
 import json
 import math
 import statistics
-import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, pyplot, save_figure, settings, write_json
-from train_throughput import parse_config
+from benchmarks.common import RESULTS, header, pyplot, save_figure, settings, write_json
+from benchmarks.rl.train_throughput import parse_config
 
 OUT = RESULTS / "time_to_walk"
 #: Every seed of the default should walk within this many env steps (median <= 1.2 M).

@@ -34,22 +34,20 @@ Chrono 10's multicore ray test treats as lying along y with the radius as half-l
 Prints a table, writes ``results/soil_cross_check.json``. Needs PyChrono with its vehicle
 module for the Chrono columns (and Chrono built with Thrust for the multicore one).
 
-    python benchmarks/soil/soil_cross_check.py
+    python -m benchmarks.soil.soil_cross_check
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, settings, table, write_json
+from benchmarks.common import RESULTS, Column, header, settings, table, write_json
 
 OUT = RESULTS / "soil_cross_check.json"
 G = 9.81

@@ -19,7 +19,7 @@ worker node (raylet, agents, actors).
    FAIL; parallel.py retries a lost trial once). Checked from the SQLite file: every
    trial is COMPLETE or FAIL, every FAIL has a ``fail_reason``, none is left RUNNING.
 
-    python benchmarks/vector/chaos.py [--short] [--seed 0] [--out PATH]
+    python -m benchmarks.vector.chaos [--short] [--seed 0] [--out PATH]
 
 Prints a table and writes ``benchmarks/results/chaos.json``; exits 1 if a check fails.
 """
@@ -41,8 +41,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, proc_cmdline, write_json
+from benchmarks.common import RESULTS, header, proc_cmdline, write_json
 
 DEFAULT_OUT = RESULTS / "chaos.json"
 #: Process titles of RayVectorEnv's workers: the socket transport's actor class is SocketWorker

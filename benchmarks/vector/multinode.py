@@ -15,7 +15,7 @@ All nodes share this machine's cores: this measures the overhead of crossing
 raylets (object transfers between nodes' stores, remote scheduling), not a
 speed-up.
 
-    python benchmarks/vector/multinode.py [--quick] [--steps 400] [--out PATH]
+    python -m benchmarks.vector.multinode [--quick] [--steps 400] [--out PATH]
 
 Prints a table and writes ``benchmarks/results/multinode.json``.
 """
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -32,8 +31,7 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, write_json
+from benchmarks.common import RESULTS, header, write_json
 
 DEFAULT_OUT = RESULTS / "multinode.json"
 GO1 = "chronogym/Go1Velocity-v0"

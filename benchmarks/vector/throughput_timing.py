@@ -10,18 +10,14 @@ Ray cluster a run uses.
 from __future__ import annotations
 
 import os
-import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import Column
-
+from benchmarks.common import Column
 from chronogym.tasks.cartpole import CartPoleTask
 from chronogym.vector.ray_vector_env import default_transport
 

@@ -7,7 +7,7 @@ commanded speed. For each checkpoint and command this rolls out the criterion's 
 ``--head-s`` seconds add and the MSE of the rest (with its mean error: a steady offset).
 Prints a table and writes ``results/tracking_transient.json``.
 
-    python benchmarks/rl/tracking_transient.py runs/time_to_walk/ray-32-0-48-s0/model_819.pt \\
+    python -m benchmarks.archive.tracking_transient runs/time_to_walk/ray-32-0-48-s0/model_819.pt \\
         runs/time_to_walk/ray-32-0-48-s1/model_1059.pt --commands 1 0 0 --commands 0.5 0 0
 """
 
@@ -15,15 +15,13 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, settings, table, write_json
+from benchmarks.common import RESULTS, Column, header, settings, table, write_json
 
 OUT = RESULTS / "tracking_transient.json"
 DEFAULT_COMMANDS = ((1.0, 0.0, 0.0), (0.5, 0.0, 0.0))
