@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
+from chronogym.validation import check_int
 
 #: Ports each node needs besides the head's GCS port; all are picked free on loopback.
 NODE_PORT_FLAGS = (
@@ -176,15 +177,9 @@ class LocalCluster:
 
     def __post_init__(self) -> None:
         for name in ("workers", "num_cpus", "object_store_mb"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"{name}={value!r}: expected an integer >= 0")
-        if self.head_cpus is not None and (
-            isinstance(self.head_cpus, bool)
-            or not isinstance(self.head_cpus, int)
-            or self.head_cpus < 0
-        ):
-            raise ValueError(f"head_cpus={self.head_cpus!r}: expected None or an integer >= 0")
+            check_int(name, getattr(self, name), 0)
+        if self.head_cpus is not None:
+            check_int("head_cpus", self.head_cpus, 0, expected="None or an integer >= 0")
         if self.object_store_mb < 75:
             raise ValueError(
                 f"object_store_mb={self.object_store_mb}: expected >= 75 (Ray's minimum)"

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from chronogym.tasks.lander.design import LanderParams
+from chronogym.validation import check_positive
 
 if TYPE_CHECKING:
     from chronogym.terrain.params import SoilParameters
@@ -85,8 +86,7 @@ class Terrain:
             )
         for name in ("soil_extent", "soil_resolution"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not 0.0 < value < math.inf:
-                raise ValueError(f"{name}={value!r}: expected a finite number > 0 (m)")
+            check_positive(name, value, "a finite number > 0 (m)")
         if self.soil_resolution > self.soil_extent / 10:
             raise ValueError(
                 f"soil_resolution={self.soil_resolution!r}: expected at most soil_extent / 10 "
