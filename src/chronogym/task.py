@@ -24,6 +24,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from chronogym.errors import TaskDefinitionError
@@ -157,8 +158,6 @@ def check_render_modes(task: Task) -> None:
 
 def check_task_spaces(task: Task) -> None:
     """Raise TaskDefinitionError when ``init`` left the spaces undefined."""
-    import gymnasium as gym
-
     for name in ("observation_space", "action_space"):
         space = getattr(task, name, None)
         if not isinstance(space, gym.spaces.Space):

@@ -12,15 +12,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from chronogym.tasks.lander.design import LanderParams
+from chronogym.terrain.params import SoilParameters, soil_preset
 from chronogym.validation import check_positive
-
-if TYPE_CHECKING:
-    from chronogym.terrain.params import SoilParameters
 
 __all__ = ["Terrain", "terrain_params"]
 
@@ -71,8 +68,6 @@ class Terrain:
 
     def _check_soil(self) -> None:
         """Validate the soil fields: preset name or parameters, level ground, grid size."""
-        from chronogym.terrain.params import SoilParameters, soil_preset
-
         if isinstance(self.soil, str):
             soil_preset(self.soil)  # raises naming the preset and the valid names
         elif not isinstance(self.soil, SoilParameters):
