@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 
 if TYPE_CHECKING:
-    from chronogym.env import SimEnv  # here: `import chronogym` registers ids, loads no env
+    from chronogym.env import SimEnv
     from chronogym.task import Task
 
 NAMESPACE = "chronogym"
