@@ -19,8 +19,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
+import chronogym  # noqa: F401  (registers the envs)
 from benchmarks.common import RESULTS, Column, header, settings, table, write_json
 
 OUT = RESULTS / "tracking_transient.json"
@@ -66,9 +68,6 @@ def main(argv: list[str] | None = None) -> None:
     for path in args.checkpoints:
         if not path.is_file():
             parser.error(f"checkpoint {str(path)!r}: no such file")
-    import gymnasium as gym
-
-    import chronogym  # noqa: F401  (registers the envs)
     from chronogym.rl.trainer import load_policy
 
     commands = [tuple(c) for c in args.commands] if args.commands else list(DEFAULT_COMMANDS)

@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import RESULTS, header, pyplot, save_figure, versions, write_json
+from chronogym.engines.chrono import import_pychrono
 from chronogym.tasks.lander import DEFAULT_DESIGN, LanderDesign, LanderParams, LanderSim
 
 DEFAULT_OUT = RESULTS / "cross_engine.json"
@@ -162,8 +163,6 @@ def main() -> None:
     )
     parser.add_argument("--designs", nargs="+", choices=list(DESIGNS), default=list(DESIGNS))
     args = parser.parse_args()
-    from chronogym.engines.chrono import import_pychrono
-
     try:
         import_pychrono()
     except ModuleNotFoundError as exc:

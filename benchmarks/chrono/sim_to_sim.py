@@ -20,8 +20,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from tqdm import tqdm
 
+import chronogym  # noqa: F401  (registers the envs)
 from benchmarks.common import (
     RESULTS,
     Column,
@@ -68,8 +71,6 @@ def evaluate_engine(
     config: str, checkpoint: Path, commands: list, episodes: int, steps: int, soil: str
 ) -> dict[str, Any]:
     """Summary rows and cost per env step of one configuration."""
-    import gymnasium as gym
-
     from chronogym.rl.evaluate import run_episode, summarize
     from chronogym.rl.quadruped import check_engine
     from chronogym.rl.trainer import load_policy
@@ -83,8 +84,6 @@ def evaluate_engine(
         task_kwargs["settings"] = ChronoGo1Settings(contact=options["contact"])
     env = StepClock(gym.make(env_id, max_episode_steps=steps, **task_kwargs))
     policy = load_policy(checkpoint)
-    from tqdm import tqdm
-
     runs = [(c, s) for c in commands for s in range(episodes)]
     results = [run_episode(env, policy, c, s) for c, s in tqdm(runs, desc=config, unit="ep")]
     dt, k = env.unwrapped.task.dt, env.unwrapped.task.k
@@ -131,7 +130,6 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"checkpoint {str(args.checkpoint)!r}: no such file")
     if args.episodes < 1 or not args.seconds > 0:
         parser.error(f"--episodes={args.episodes} --seconds={args.seconds}: expected >= 1, > 0")
-    import chronogym  # noqa: F401  (registers the envs)
     from chronogym.rl.evaluate import DEFAULT_COMMANDS
 
     commands = list(DEFAULT_COMMANDS)

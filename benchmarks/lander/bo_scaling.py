@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from benchmarks.common import (
     RESULTS,
@@ -42,6 +43,14 @@ from benchmarks.common import (
     table,
     write_json,
 )
+from chronogym.optim.lander import (
+    ENGINES,
+    TERRAINS,
+    LanderObjective,
+    check_engine,
+    suggest_lander_design,
+)
+from chronogym.ray_runtime import ensure_ray
 
 DEFAULT_OUT = RESULTS
 
@@ -72,8 +81,6 @@ class Run:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    from chronogym.optim.lander import ENGINES, TERRAINS
-
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4, 8])
     parser.add_argument("--trials", type=int, default=48, help="trial budget of every run")
@@ -90,8 +97,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         args.workers, args.trials, args.seeds, args.startup_trials = [1, 2], 12, 1, 4
     if min(args.workers) < 1 or args.trials < 2 or args.seeds < 1:
         parser.error("expected --workers >= 1, --trials >= 2 and --seeds >= 1")
-    from chronogym.optim.lander import check_engine
-
     for terrain in args.terrain:
         try:
             check_engine(args.engine, terrain)
@@ -105,7 +110,6 @@ def run_once(terrain: str, workers: int, seed: int, liar: bool, args: argparse.N
     import optuna
 
     from chronogym.optim import run_parallel_study
-    from chronogym.optim.lander import LanderObjective, suggest_lander_design
 
     sampler = optuna.samplers.TPESampler(
         seed=seed, multivariate=True, constant_liar=liar, n_startup_trials=args.startup_trials
@@ -259,9 +263,6 @@ def format_table(terrain: str, summary: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     import optuna
-    from tqdm import tqdm
-
-    from chronogym.ray_runtime import ensure_ray
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     ensure_ray(args.address)

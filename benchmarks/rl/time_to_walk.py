@@ -40,10 +40,14 @@ import argparse
 import csv
 import json
 import math
+import shutil
 import statistics
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+
+import chronogym  # noqa: F401
 from benchmarks.common import RESULTS, header, pyplot, save_figure, settings, write_json
 from benchmarks.rl.train_throughput import parse_config
 
@@ -117,8 +121,6 @@ def train_run(
 ) -> Path:
     """Train one run from scratch; its folder (``progress.csv``, ``model_<it>.pt``).
     ``budget``: ``{"env_steps": n}`` or ``{"minutes": m}``."""
-    import shutil
-
     from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
 
     c = parse_config(split_config(config)[0])
@@ -168,9 +170,6 @@ def check(env: Any, path: Path, criterion: Any) -> tuple[bool, int, float]:
 def evaluate_run(run: Path, criterion: Any, config: str) -> tuple[list[dict[str, Any]], dict]:
     """Check the run's checkpoints in order until one walks, on the physics step the run
     trained with (one row per checkpoint); then its ``best.pt`` and last checkpoint."""
-    import gymnasium as gym
-
-    import chronogym  # noqa: F401
     from chronogym.rl.best import read_best
     from chronogym.rl.quadruped import ENV_ID
 

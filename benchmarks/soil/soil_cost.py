@@ -39,6 +39,7 @@ import numpy as np
 import chronogym  # noqa: F401  (sets the GL backend before mujoco rendering is touched)
 from benchmarks.common import RESULTS, Column, header, table, versions, write_json
 from benchmarks.rl.quadruped_physics import action_sequence  # same seeded targets
+from chronogym.env import SimEnv
 from chronogym.tasks.quadruped import FOOT_GEOM_NAMES, LEG_NAMES, load_go1
 from chronogym.terrain import MujocoSoil
 
@@ -146,7 +147,6 @@ def run(model, data, soil, targets: np.ndarray) -> tuple[float, dict]:
 def task_episodes(targets: np.ndarray, repeats: int) -> list[dict]:
     """The Go1 task as training runs it (``SimEnv.step``, the task's physics step per terrain,
     ``PHYSICS_STEP``; on soil the window follows the trunk), the same targets."""
-    from chronogym.env import SimEnv
     from chronogym.tasks.quadruped import DEFAULT_JOINT_POS, Go1VelocityTask
 
     actions = ((targets - DEFAULT_JOINT_POS) / 0.25).astype(np.float32)

@@ -27,6 +27,7 @@ Prints a table and writes ``benchmarks/results/chaos.json``; exits 1 if a check 
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import signal
 import sys
@@ -42,6 +43,8 @@ import gymnasium as gym
 import numpy as np
 
 from benchmarks.common import RESULTS, header, proc_cmdline, write_json
+from chronogym.optim.lander import LanderObjective, suggest_lander_design
+from chronogym.testing import LocalCluster
 
 DEFAULT_OUT = RESULTS / "chaos.json"
 #: Process titles of RayVectorEnv's workers: the socket transport's actor class is SocketWorker
@@ -224,8 +227,6 @@ class ChaosCounter(gym.vector.VectorWrapper):
 
 
 def chaos_training(cluster: Any, settings: Settings, seed: int, out: Path) -> dict[str, Any]:
-    import csv
-
     from chronogym.rl.quadruped import make_quadruped_vec_env, quadruped_train_config
     from chronogym.rl.trainer import train
     from chronogym.rl.vecenv import RslRlVecEnv
@@ -289,7 +290,6 @@ def chaos_study(cluster: Any, settings: Settings, seed: int, db: Path) -> dict[s
     import optuna
 
     from chronogym.optim import open_storage, run_parallel_study
-    from chronogym.optim.lander import LanderObjective, suggest_lander_design
     from chronogym.optim.parallel import finished_trials
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -437,8 +437,6 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args()
     settings = SHORT if args.short else FULL
-
-    from chronogym.testing import LocalCluster
 
     with tempfile.TemporaryDirectory() as tmp, LocalCluster(workers=2, num_cpus=1) as cluster:
         cluster.connect()

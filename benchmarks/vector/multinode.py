@@ -23,6 +23,7 @@ Prints a table and writes ``benchmarks/results/multinode.json``.
 from __future__ import annotations
 
 import argparse
+import csv
 import hashlib
 import tempfile
 import time
@@ -32,6 +33,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import RESULTS, header, write_json
+from chronogym.optim.lander import LanderObjective, suggest_lander_design
+from chronogym.testing import LocalCluster
 
 DEFAULT_OUT = RESULTS / "multinode.json"
 GO1 = "chronogym/Go1Velocity-v0"
@@ -88,8 +91,6 @@ def ray_rollout(cluster: Any, steps: int) -> dict[str, Any]:
 
 def train_check(address: str, out: Path) -> dict[str, Any]:
     """train_quadruped for 2 iterations on the cluster and serially: same numbers?"""
-    import csv
-
     import torch
 
     from chronogym.rl.quadruped import quadruped_train_config, train_quadruped
@@ -128,7 +129,6 @@ def lander_check(address: str, out: Path) -> dict[str, Any]:
     import optuna
 
     from chronogym.optim import open_storage, run_parallel_study
-    from chronogym.optim.lander import LanderObjective, suggest_lander_design
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     trials = {}
@@ -158,8 +158,6 @@ def lander_check(address: str, out: Path) -> dict[str, Any]:
 
 
 def run_cluster(label: str, workers: int, head_cpus: int, steps: int, checks: bool) -> dict:
-    from chronogym.testing import LocalCluster
-
     started = time.perf_counter()
     with LocalCluster(workers=workers, num_cpus=1, head_cpus=head_cpus) as cluster:
         start_s = time.perf_counter() - started

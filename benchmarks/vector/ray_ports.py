@@ -21,6 +21,7 @@ from pathlib import Path
 
 if not __package__:  # run by path, as tests/test_security.py does: `benchmarks` is 2 folders up
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+import chronogym
 from benchmarks.common import (
     RESULTS,
     Column,
@@ -142,8 +143,6 @@ def main() -> None:
     os.environ.pop("RAY_ADDRESS", None)  # a fresh local cluster, as chronogym starts it
 
     import ray
-
-    import chronogym
 
     vec = chronogym.RayVectorEnv("chronogym/CartPole-v0", 4, envs_per_worker=2)
     try:

@@ -18,6 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 from benchmarks.common import Column
+from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
 from chronogym.tasks.cartpole import CartPoleTask
 from chronogym.vector.ray_vector_env import default_transport
 
@@ -186,8 +187,6 @@ def start_ray() -> None:
     """One local Ray cluster for the whole run, its workers at chronogym's nice value (0), as
     ``chronogym.ray_runtime.ensure_ray`` starts one; RayVectorEnv then reuses it."""
     import ray
-
-    from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
 
     extra = worker_niceness_env(WORKER_NICENESS)
     os.environ.update(extra)  # read by the raylet that ray.init starts
