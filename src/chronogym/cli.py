@@ -22,6 +22,7 @@ from tqdm import tqdm
 import chronogym  # noqa: F401  (registers the ids, picks a headless GL backend)
 from chronogym.cli_errors import UsageError, first_line, run_command
 from chronogym.cli_parser import build_parser
+from chronogym.optim import open_storage, run_parallel_study
 from chronogym.optim.lander import LanderObjective, describe_design, suggest_lander_design
 from chronogym.rl.checkpoint import read_checkpoint
 from chronogym.rl.evaluate import format_summary
@@ -151,8 +152,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_optimize(args: argparse.Namespace) -> int:
     """Optimize the lander's absorbers with Optuna TPE, trials on parallel Ray workers."""
     import optuna  # the optim extra
-
-    from chronogym.optim import run_parallel_study
 
     if args.backend == "serial" and args.workers != 1:
         raise UsageError(
@@ -321,8 +320,6 @@ def open_study(url: str, study_name: str, sampler: Any) -> Any:
     does not open (unknown scheme, missing driver, unreachable server) is a UsageError."""
     import optuna  # the optim extra (with SQLAlchemy)
     import sqlalchemy.exc
-
-    from chronogym.optim import open_storage
 
     try:
         storage = open_storage(url)
