@@ -1,8 +1,8 @@
 """What the benchmark scripts share: the JSON header and machine record, writing the JSON,
 aligned text tables, PNG figures, and reading ``/proc`` (CPU time, process tables).
 
-Not a script: ``python benchmarks/X.py`` puts this folder first on ``sys.path``, so each
-script imports it as ``common``.
+Not a script: the scripts are modules of the ``benchmarks`` package, run from the repository
+root as ``python -m benchmarks.<folder>.<script>``, and import this as ``benchmarks.common``.
 
 Every JSON result starts with :func:`header`::
 
@@ -33,8 +33,17 @@ from typing import Any
 
 #: Where the committed results live (``benchmarks/results``).
 RESULTS = Path(__file__).resolve().parent / "results"
+#: The repository root: the folder that holds the ``benchmarks`` package.
+REPO = Path(__file__).resolve().parents[1]
 #: Packages whose versions every machine record holds.
 PACKAGES = ("chronogym", "numpy", "mujoco", "gymnasium", "ray")
+
+
+def child_env(**extra: str) -> dict[str, str]:
+    """``os.environ`` plus ``extra``, with :data:`REPO` first on ``PYTHONPATH``: a child Python
+    process (``python -m benchmarks...`` or ``-c``) imports ``benchmarks`` from any folder."""
+    paths = [str(REPO), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    return {**os.environ, **extra, "PYTHONPATH": os.pathsep.join(paths)}
 
 
 # -- JSON header and machine record ---------------------------------------------------------

@@ -40,7 +40,7 @@ design within 2 % on a_max, E_abs, stroke and J; see docs/performance/chrono.md)
 * **Cost.**  A Chrono landing is 5-18x dearer: ~1 ms per 0.25 ms step (the sparse LU
   about 0.7 ms, the Python side of the tick 0.3 ms) against MuJoCo's ~0.1 ms per 0.5 ms.
 
-    python benchmarks/chrono/cross_engine.py [--convergence] [--out JSON]
+    python -m benchmarks.chrono.cross_engine [--convergence] [--out JSON]
 
 The JSON goes to ``benchmarks/results/cross_engine.json`` unless ``--out`` names another file.
 
@@ -61,9 +61,8 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, pyplot, save_figure, versions, write_json
-
+from benchmarks.common import RESULTS, header, pyplot, save_figure, versions, write_json
+from chronogym.engines.chrono import import_pychrono
 from chronogym.tasks.lander import DEFAULT_DESIGN, LanderDesign, LanderParams, LanderSim
 
 DEFAULT_OUT = RESULTS / "cross_engine.json"
@@ -164,8 +163,6 @@ def main() -> None:
     )
     parser.add_argument("--designs", nargs="+", choices=list(DESIGNS), default=list(DESIGNS))
     args = parser.parse_args()
-    from chronogym.engines.chrono import import_pychrono
-
     try:
         import_pychrono()
     except ModuleNotFoundError as exc:

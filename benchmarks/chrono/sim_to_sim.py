@@ -8,23 +8,33 @@ MSEs over ``--episodes`` episodes (seeds 0, 1, ...), and each engine's cost per 
 wall time of ``env.step``, the policy excluded). Needs PyChrono for the Chrono column.
 Prints a table and writes ``results/sim_to_sim.json`` and a PNG.
 
-    python benchmarks/chrono/sim_to_sim.py runs/time_to_walk/ray-32-0-48-s0/model_819.pt
-    python benchmarks/chrono/sim_to_sim.py CKPT --configs mujoco-soil chrono-scm \
+    python -m benchmarks.chrono.sim_to_sim runs/time_to_walk/ray-32-0-48-s0/model_819.pt
+    python -m benchmarks.chrono.sim_to_sim CKPT --configs mujoco-soil chrono-scm \
         --out benchmarks/results/sim_to_sim_soil.json
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from tqdm import tqdm
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
+import chronogym  # noqa: F401  (registers the envs)
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    pyplot,
+    save_figure,
+    settings,
+    table,
+    write_json,
+)
 
 OUT = RESULTS / "sim_to_sim.json"
 #: Configurations: engine and task arguments. Rigid ground: the MuJoCo task and the Chrono task
@@ -61,8 +71,6 @@ def evaluate_engine(
     config: str, checkpoint: Path, commands: list, episodes: int, steps: int, soil: str
 ) -> dict[str, Any]:
     """Summary rows and cost per env step of one configuration."""
-    import gymnasium as gym
-
     from chronogym.rl.trainer import load_policy
     from chronogym.tasks.quadruped.chrono_model import ChronoGo1Settings
     from chronogym.tasks.quadruped.engines import check_engine
@@ -76,8 +84,6 @@ def evaluate_engine(
         task_kwargs["settings"] = ChronoGo1Settings(contact=options["contact"])
     env = StepClock(gym.make(env_id, max_episode_steps=steps, **task_kwargs))
     policy = load_policy(checkpoint)
-    from tqdm import tqdm
-
     runs = [(c, s) for c in commands for s in range(episodes)]
     results = [run_episode(env, policy, c, s) for c, s in tqdm(runs, desc=config, unit="ep")]
     dt, k = env.unwrapped.task.dt, env.unwrapped.task.k
@@ -124,7 +130,6 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"checkpoint {str(args.checkpoint)!r}: no such file")
     if args.episodes < 1 or not args.seconds > 0:
         parser.error(f"--episodes={args.episodes} --seconds={args.seconds}: expected >= 1, > 0")
-    import chronogym  # noqa: F401  (registers the envs)
     from chronogym.tasks.quadruped.evaluation import DEFAULT_COMMANDS
 
     commands = list(DEFAULT_COMMANDS)

@@ -10,11 +10,11 @@ summary, and prints time-to-target ratios.
 Wall-clock counts from the first trial (worker start-up is reported apart). The target J
 is the worst of the final best values of all constant-liar runs, so every run reaches it.
 
-    python benchmarks/lander/bo_scaling.py                  # W in {1, 2, 4, 8}, 2 seeds, rigid
-    python benchmarks/lander/bo_scaling.py --quick          # smoke run
-    python benchmarks/lander/bo_scaling.py --terrain rigid rough --seeds 3 --address auto
-    python benchmarks/lander/bo_scaling.py --terrain soil   # SCM soil: ~2 s a landing (rigid 0.3)
-    python benchmarks/lander/bo_scaling.py --engine chrono --terrain scm --workers 1 2 --seeds 1 \
+    python -m benchmarks.lander.bo_scaling                  # W in {1, 2, 4, 8}, 2 seeds, rigid
+    python -m benchmarks.lander.bo_scaling --quick          # smoke run
+    python -m benchmarks.lander.bo_scaling --terrain rigid rough --seeds 3 --address auto
+    python -m benchmarks.lander.bo_scaling --terrain soil   # SCM soil: ~2 s a landing (rigid 0.3)
+    python -m benchmarks.lander.bo_scaling --engine chrono --terrain scm --workers 1 2 --seeds 1 \
         --trials 16 --skip-liar-check --out-dir benchmarks/results/bo_scaling_chrono_scm
         # Chrono's SCMTerrain (needs PyChrono with its vehicle module): ~16 s a landing
 """
@@ -31,9 +31,26 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    pyplot,
+    save_figure,
+    settings,
+    table,
+    write_json,
+)
+from chronogym.optim.lander import (
+    ENGINES,
+    TERRAINS,
+    LanderObjective,
+    check_engine,
+    suggest_lander_design,
+)
+from chronogym.ray_runtime import ensure_ray
 
 DEFAULT_OUT = RESULTS
 
@@ -64,8 +81,6 @@ class Run:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    from chronogym.optim.lander import ENGINES, TERRAINS
-
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4, 8])
     parser.add_argument("--trials", type=int, default=48, help="trial budget of every run")
@@ -82,8 +97,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         args.workers, args.trials, args.seeds, args.startup_trials = [1, 2], 12, 1, 4
     if min(args.workers) < 1 or args.trials < 2 or args.seeds < 1:
         parser.error("expected --workers >= 1, --trials >= 2 and --seeds >= 1")
-    from chronogym.optim.lander import check_engine
-
     for terrain in args.terrain:
         try:
             check_engine(args.engine, terrain)
@@ -97,7 +110,6 @@ def run_once(terrain: str, workers: int, seed: int, liar: bool, args: argparse.N
     import optuna
 
     from chronogym.optim import run_parallel_study
-    from chronogym.optim.lander import LanderObjective, suggest_lander_design
 
     sampler = optuna.samplers.TPESampler(
         seed=seed, multivariate=True, constant_liar=liar, n_startup_trials=args.startup_trials
@@ -251,9 +263,6 @@ def format_table(terrain: str, summary: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     import optuna
-    from tqdm import tqdm
-
-    from chronogym.ray_runtime import ensure_ray
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     ensure_ray(args.address)

@@ -14,8 +14,8 @@ impratio-100 settings (the walking criterion's commands and episodes, ``WalkingC
 a policy trained at one step that walks as well at the smaller ones has not learned to exploit
 the step's error.
 
-    python benchmarks/rl/quadruped_physics.py [--out benchmarks/results/quadruped_physics.json]
-    python benchmarks/rl/quadruped_physics.py --policy runs/quadruped/latest.pt
+    python -m benchmarks.rl.quadruped_physics [--out benchmarks/results/quadruped_physics.json]
+    python -m benchmarks.rl.quadruped_physics --policy runs/quadruped/latest.pt
 
 Prints a table and writes JSON. Timings are one core, best of ``--repeats``.
 """
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -32,10 +31,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, table, versions, write_json
-
 import chronogym  # noqa: F401  (sets the GL backend before mujoco rendering is touched)
+from benchmarks.common import RESULTS, Column, header, table, versions, write_json
 from chronogym.env import SimEnv
 from chronogym.tasks.quadruped import DEFAULT_JOINT_POS, FOOT_GEOM_NAMES, Go1VelocityTask
 from chronogym.tasks.quadruped.model import go1_xml_path

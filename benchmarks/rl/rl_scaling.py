@@ -5,10 +5,10 @@ settings and seed; the figure has the paper's three panels (mean episode reward,
 x-velocity MSE and y-velocity MSE against wall time). Writes one CSV per configuration, a JSON
 summary and ``rl_scaling.png``.
 
-    python benchmarks/rl/rl_scaling.py                  # short budget: 2 min per configuration
-    python benchmarks/rl/rl_scaling.py --full           # 30 min per configuration
-    python benchmarks/rl/rl_scaling.py --minutes 5 --configs ray-16 serial-16
-    python benchmarks/rl/rl_scaling.py --engine chrono --resume runs/go1/best.pt --finetune
+    python -m benchmarks.rl.rl_scaling                  # short budget: 2 min per configuration
+    python -m benchmarks.rl.rl_scaling --full           # 30 min per configuration
+    python -m benchmarks.rl.rl_scaling --minutes 5 --configs ray-16 serial-16
+    python -m benchmarks.rl.rl_scaling --engine chrono --resume runs/go1/best.pt --finetune
 
 Configuration names are ``<backend>-<n_env>``; the serial backend steps its envs one after
 another in the training process (the paper's "no Ray" baseline, same env code).
@@ -26,12 +26,10 @@ import csv
 import math
 import os
 import shutil
-import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, pyplot, save_figure, table, write_json
+from benchmarks.common import RESULTS, Column, header, pyplot, save_figure, table, write_json
 
 DEFAULT_OUT = RESULTS / "rl_scaling"
 DEFAULT_RUNS = Path("runs") / "rl_scaling"  # checkpoints and TensorBoard events (not results)

@@ -8,18 +8,25 @@ trains with 1 m/s every 15 s) and foot-ground friction drawn per episode from a 
 Prints a table and writes ``robustness.json`` (every command's row per condition) and
 ``robustness.png``.
 
-    python benchmarks/rl/robustness.py runs/time_to_walk/serial-32-0-48-s0/best.pt
+    python -m benchmarks.rl.robustness runs/time_to_walk/serial-32-0-48-s0/best.pt
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    pyplot,
+    save_figure,
+    settings,
+    table,
+    write_json,
+)
 
 OUT = RESULTS / "robustness"
 

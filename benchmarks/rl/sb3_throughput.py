@@ -17,9 +17,9 @@ so machine noise falls on all of them. Reported per backend (medians over the ro
 PPO settings are SB3's defaults except ``n_steps`` (``--n-steps`` per env and rollout); torch
 uses one thread (``torch.set_num_threads(1)``), as chronogym's training does on small machines.
 
-    python benchmarks/rl/sb3_throughput.py               # 3 rounds of 32,768 steps per backend
-    python benchmarks/rl/sb3_throughput.py --quick       # smoke run (JSON to a temporary file)
-    python benchmarks/rl/sb3_throughput.py --backends subproc ray --rounds 5
+    python -m benchmarks.rl.sb3_throughput               # 3 rounds of 32,768 steps per backend
+    python -m benchmarks.rl.sb3_throughput --quick       # smoke run (JSON to a temporary file)
+    python -m benchmarks.rl.sb3_throughput --backends subproc ray --rounds 5
 """
 
 from __future__ import annotations
@@ -34,8 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, settings, table, write_json
+from benchmarks.common import RESULTS, Column, child_env, header, settings, table, write_json
 
 BACKENDS = ("dummy", "subproc", "ray")
 ENV_ID = "HalfCheetah-v5"
@@ -43,9 +42,8 @@ OUT = RESULTS / "sb3_throughput.json"
 
 # Runs in the subprocess: one PPO learn() with the timing wrapper and callback, as JSON.
 CHILD = r"""
-import json, sys, time
-sys.path.insert(0, sys.argv[2])
-import sb3_throughput
+import json, sys
+from benchmarks.rl import sb3_throughput
 print(json.dumps(sb3_throughput.train_once(**json.loads(sys.argv[1]))))
 """
 
@@ -149,12 +147,12 @@ def run_once(backend: str, args: argparse.Namespace) -> dict[str, float]:
         "seed": args.seed,
         "envs_per_worker": args.envs_per_worker,
     }
-    here = str(Path(__file__).resolve().parent)
     done = subprocess.run(
-        [sys.executable, "-c", CHILD, json.dumps(kwargs), here],
+        [sys.executable, "-c", CHILD, json.dumps(kwargs)],
         capture_output=True,
         text=True,
         check=False,
+        env=child_env(),
     )
     if done.returncode != 0:
         raise RuntimeError(f"{backend} failed:\n{done.stderr[-3000:]}")

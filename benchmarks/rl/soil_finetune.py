@@ -9,8 +9,8 @@ paper's three panels against wall time (``soil_finetune.png``) and a JSON summar
 deterministic policy (action mean) of the checkpoint before and of each run after is rolled
 out on soil for a few fixed commands, and the table shows their velocity-tracking errors.
 
-    python benchmarks/rl/soil_finetune.py                    # 3 min per configuration
-    python benchmarks/rl/soil_finetune.py --minutes 20 --checkpoint runs/go1-rigid/latest.pt
+    python -m benchmarks.rl.soil_finetune                    # 3 min per configuration
+    python -m benchmarks.rl.soil_finetune --minutes 20 --checkpoint runs/go1-rigid/latest.pt
 
 Without a rigid checkpoint (``--checkpoint``, default ``runs/go1-rigid/latest.pt``, written by
 ``chronogym train quadruped --out runs/go1-rigid``), one is trained first for
@@ -22,12 +22,10 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS
-from rl_scaling import (  # this script's folder
+from benchmarks.common import RESULTS
+from benchmarks.rl.rl_scaling import (  # this script's folder
     add_run_flags,
     check_run_flags,
     run_configs,

@@ -16,10 +16,10 @@ steps; per run: env steps and minutes to walk, best and last checkpoint), ``time
 (every checkpoint checked) and ``time_to_walk.png`` (commands passed and worst MSE against
 env steps, one line per run).
 
-    python benchmarks/rl/time_to_walk.py                      # the default, seeds 0-4
-    python benchmarks/rl/time_to_walk.py --configs ray:32:0:48+ent1e-3 --seeds 1 2 --keep
-    python benchmarks/rl/time_to_walk.py --evaluate-only --keep   # re-check the runs there
-    python benchmarks/rl/time_to_walk.py --merge /tmp/a /tmp/b --keep   # invocations run apart
+    python -m benchmarks.rl.time_to_walk                      # the default, seeds 0-4
+    python -m benchmarks.rl.time_to_walk --configs ray:32:0:48+ent1e-3 --seeds 1 2 --keep
+    python -m benchmarks.rl.time_to_walk --evaluate-only --keep   # re-check the runs there
+    python -m benchmarks.rl.time_to_walk --merge /tmp/a /tmp/b --keep   # invocations run apart
 
 A configuration is as in ``train_throughput.py``
 (``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``)
@@ -40,14 +40,16 @@ import argparse
 import csv
 import json
 import math
+import shutil
 import statistics
-import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, pyplot, save_figure, settings, write_json
-from train_throughput import parse_config
+import gymnasium as gym
+
+import chronogym  # noqa: F401
+from benchmarks.common import RESULTS, header, pyplot, save_figure, settings, write_json
+from benchmarks.rl.train_throughput import parse_config
 
 OUT = RESULTS / "time_to_walk"
 #: Every seed of the default should walk within this many env steps (median <= 1.2 M).
@@ -119,8 +121,6 @@ def train_run(
 ) -> Path:
     """Train one run from scratch; its folder (``progress.csv``, ``model_<it>.pt``).
     ``budget``: ``{"env_steps": n}`` or ``{"minutes": m}``."""
-    import shutil
-
     from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 
     c = parse_config(split_config(config)[0])
@@ -170,9 +170,6 @@ def check(env: Any, path: Path, criterion: Any) -> tuple[bool, int, float]:
 def evaluate_run(run: Path, criterion: Any, config: str) -> tuple[list[dict[str, Any]], dict]:
     """Check the run's checkpoints in order until one walks, on the physics step the run
     trained with (one row per checkpoint); then its ``best.pt`` and last checkpoint."""
-    import gymnasium as gym
-
-    import chronogym  # noqa: F401
     from chronogym.rl.best import read_best
     from chronogym.tasks.quadruped.engines import ENV_ID
 

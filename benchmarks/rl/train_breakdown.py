@@ -16,9 +16,9 @@ synchronous (``policy_lag=0``) loop of ``chronogym.rl.trainer.train`` with every
 Prints a table (ms per iteration, medians over the iterations after ``--warmup``) and writes
 ``results/train_breakdown.json``.
 
-    python benchmarks/rl/train_breakdown.py                       # ray:32:0 and serial:32:0
-    python benchmarks/rl/train_breakdown.py --configs ray:16:0 ray:64:0:24 --iterations 20
-    python benchmarks/rl/train_breakdown.py --configs ray:32:0 ray:32:0+dw serial:32:0
+    python -m benchmarks.rl.train_breakdown                       # ray:32:0 and serial:32:0
+    python -m benchmarks.rl.train_breakdown --configs ray:16:0 ray:64:0:24 --iterations 20
+    python -m benchmarks.rl.train_breakdown --configs ray:32:0 ray:32:0+dw serial:32:0
 
 Configurations are ``train_throughput.py``'s, synchronous only (policy lag 0); a ``+dw`` suffix
 on a Ray configuration sets ``RayVectorEnv(driver_worker=True)``.
@@ -37,9 +37,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, settings, table, write_json
-from train_throughput import TrainConfig, parse_config
+from benchmarks.common import RESULTS, Column, child_env, header, settings, table, write_json
+from benchmarks.rl.train_throughput import TrainConfig, parse_config
 
 DEFAULT_CONFIGS = ("ray:32:0", "serial:32:0")
 DRIVER_WORKER = "+dw"  # config suffix: the driver steps one worker's envs (Ray only)
@@ -154,9 +153,9 @@ def measure(
 def run_config(text: str, iterations: int, warmup: int) -> dict[str, Any]:
     """Measure one configuration in a subprocess; medians (ms) of its phases."""
     done = subprocess.run(
-        [sys.executable, __file__, "--one", text, "--iterations", str(iterations),
-         "--warmup", str(warmup)],
-        capture_output=True, text=True, check=False,
+        [sys.executable, "-m", "benchmarks.rl.train_breakdown", "--one", text,
+         "--iterations", str(iterations), "--warmup", str(warmup)],
+        capture_output=True, text=True, check=False, env=child_env(),
     )  # fmt: skip
     if done.returncode != 0:
         raise RuntimeError(f"{text} failed:\n{done.stderr[-3000:]}")

@@ -7,8 +7,8 @@ rounds, each round the median over iterations after ``--warmup``): env-steps/s, 
 iteration's wall time, its rollout (``collect_s``) and update (``learn_s``) seconds, and the
 ratio to the first configuration.
 
-    python benchmarks/rl/train_throughput.py                        # default comparison
-    python benchmarks/rl/train_throughput.py --configs serial:16:0 ray:16:0 ray:16:1 --rounds 3
+    python -m benchmarks.rl.train_throughput                        # default comparison
+    python -m benchmarks.rl.train_throughput --configs serial:16:0 ray:16:0 ray:16:1 --rounds 3
 
 A configuration is
 ``<ray|serial>:<num_envs>:<policy_lag>[:<steps_per_env>[:<physics_ms>[:<update_threads>]]]``
@@ -29,8 +29,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, settings, table, write_json
+from benchmarks.common import RESULTS, Column, header, settings, table, write_json
 
 DEFAULT_CONFIGS = ("serial:32:0:48:5:1", "ray:32:0", "serial:32:0", "ray:32:1")
 OUT = RESULTS / "train_throughput.json"

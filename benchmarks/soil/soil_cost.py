@@ -22,14 +22,13 @@ following the trunk) at each terrain's default physics step (``PHYSICS_STEP``: r
 soil 2 ms x 10, the smaller step that the soil's explicit force law needs): the cost of a soil
 episode against a rigid one, as training pays it.
 
-    python benchmarks/soil/soil_cost.py [--out benchmarks/results/soil_cost.json]
+    python -m benchmarks.soil.soil_cost [--out benchmarks/results/soil_cost.json]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -37,11 +36,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, table, versions, write_json
-from rl.quadruped_physics import action_sequence  # same seeded targets
-
 import chronogym  # noqa: F401  (sets the GL backend before mujoco rendering is touched)
+from benchmarks.common import RESULTS, Column, header, table, versions, write_json
+from benchmarks.rl.quadruped_physics import action_sequence  # same seeded targets
+from chronogym.env import SimEnv
 from chronogym.tasks.quadruped import FOOT_GEOM_NAMES, LEG_NAMES, load_go1
 from chronogym.terrain import MujocoSoil
 
@@ -149,7 +147,6 @@ def run(model, data, soil, targets: np.ndarray) -> tuple[float, dict]:
 def task_episodes(targets: np.ndarray, repeats: int) -> list[dict]:
     """The Go1 task as training runs it (``SimEnv.step``, the task's physics step per terrain,
     ``PHYSICS_STEP``; on soil the window follows the trunk), the same targets."""
-    from chronogym.env import SimEnv
     from chronogym.tasks.quadruped import DEFAULT_JOINT_POS, Go1VelocityTask
 
     actions = ((targets - DEFAULT_JOINT_POS) / 0.25).astype(np.float32)

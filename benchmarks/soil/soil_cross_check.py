@@ -34,22 +34,25 @@ Chrono 10's multicore ray test treats as lying along y with the radius as half-l
 Prints a table, writes ``results/soil_cross_check.json``. Needs PyChrono with its vehicle
 module for the Chrono columns (and Chrono built with Thrust for the multicore one).
 
-    python benchmarks/soil/soil_cross_check.py
+    python -m benchmarks.soil.soil_cross_check
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, settings, table, write_json
+import chronogym  # noqa: F401  (registers the envs)
+from benchmarks.common import RESULTS, Column, header, settings, table, write_json
+from chronogym.engines.chrono import body_pos, import_pychrono, set_collision_system
+from chronogym.engines.chrono_scm import ChronoSCM
+from chronogym.terrain import MujocoSoil, soil_preset
 
 OUT = RESULTS / "soil_cross_check.json"
 G = 9.81
@@ -76,8 +79,6 @@ def slide_damping(params: Any, mass: float) -> float:
 def mujoco_plate(params: Any, mass: float, settle_s: float, average_s: float) -> float:
     import mujoco
 
-    from chronogym.terrain import MujocoSoil
-
     dt = 0.002
     damping = slide_damping(params, mass)
     xml = f"""<mujoco><option timestep="{dt}"/><worldbody>
@@ -103,9 +104,6 @@ def chrono_plate(
 ) -> tuple[float, int]:
     """Static sinkage [m] and the number of grid nodes Chrono's ray casts hit under the plate,
     on the named collision system."""
-    from chronogym.engines.chrono import body_pos, import_pychrono, set_collision_system
-    from chronogym.engines.chrono_scm import ChronoSCM
-
     chrono = import_pychrono()
     dt = 0.0005
     system = chrono.ChSystemSMC()
@@ -146,8 +144,6 @@ def ray_error(collision: str, shape: str) -> float:
     shape's true surface, for vertical rays every 0.25 mm from the centre to 2 cm outside the
     outline of a moving shape: the 0.21 m plate, or a 2 cm sphere (a Go1 foot). The shape
     moves down at 0.5 m/s for two 0.5 ms steps (rays see its pose at the last step's start)."""
-    from chronogym.engines.chrono import import_pychrono, set_collision_system
-
     chrono = import_pychrono()
     system = chrono.ChSystemSMC()
     system.SetGravitationalAcceleration(chrono.ChVector3d(0, 0, 0))
@@ -216,10 +212,6 @@ GO1_CHRONO = {
 def go1_standing(engine: str, preset: str, stand_s: float) -> dict[str, float]:
     """Mean foot sinkage and base height of the Go1 standing on ``engine``'s soil:
     ``mujoco``, or a :data:`GO1_CHRONO` variant, on the same 1 cm grid."""
-    import gymnasium as gym
-
-    import chronogym  # noqa: F401  (registers the envs)
-
     if engine == "mujoco":
         env = gym.make("chronogym/Go1Velocity-v0", terrain="soil", soil=preset, soil_resolution=RES)
     else:
@@ -318,8 +310,6 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if not 0 < args.average_s <= args.settle_s or not args.stand_s > 0:
         parser.error("expected 0 < --average-s <= --settle-s and --stand-s > 0")
-    from chronogym.terrain import soil_preset
-
     multicore = not args.no_multicore
     rows = []
     for shape, label in (("plate", "a moving 0.21 m plate"), ("sphere", "a moving 2 cm sphere")):

@@ -1,7 +1,7 @@
 """Chaos under load: SIGKILL Ray workers (and a whole node) during PPO training and a
 lander study on a 3-node loopback cluster, then prove that nothing was lost.
 
-The cluster is ``chronogym.cluster.LocalCluster`` (head + 2 worker nodes, 1 CPU each,
+The cluster is ``chronogym.testing.LocalCluster`` (head + 2 worker nodes, 1 CPU each,
 ``ray start`` subprocesses). A killer thread with its own seeded RNG picks a random
 worker process of *this* cluster (``ray::SocketWorker`` or ``ray::EnvGroup`` during
 training, ``ray::TrialWorker`` during the study; other Ray clusters on the machine are never
@@ -19,7 +19,7 @@ worker node (raylet, agents, actors).
    FAIL; parallel.py retries a lost trial once). Checked from the SQLite file: every
    trial is COMPLETE or FAIL, every FAIL has a ``fail_reason``, none is left RUNNING.
 
-    python benchmarks/vector/chaos.py [--short] [--seed 0] [--out PATH]
+    python -m benchmarks.vector.chaos [--short] [--seed 0] [--out PATH]
 
 Prints a table and writes ``benchmarks/results/chaos.json``; exits 1 if a check fails.
 """
@@ -27,6 +27,7 @@ Prints a table and writes ``benchmarks/results/chaos.json``; exits 1 if a check 
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import signal
 import sys
@@ -41,8 +42,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, proc_cmdline, write_json
+from benchmarks.common import RESULTS, header, proc_cmdline, write_json
+from chronogym.optim.lander import LanderObjective, suggest_lander_design
+from chronogym.testing import LocalCluster
 
 DEFAULT_OUT = RESULTS / "chaos.json"
 #: Process titles of RayVectorEnv's workers: the socket transport's actor class is SocketWorker
@@ -225,8 +227,6 @@ class ChaosCounter(gym.vector.VectorWrapper):
 
 
 def chaos_training(cluster: Any, settings: Settings, seed: int, out: Path) -> dict[str, Any]:
-    import csv
-
     from chronogym.rl.trainer import train
     from chronogym.rl.vecenv import RslRlVecEnv
     from chronogym.tasks.quadruped.training import make_quadruped_vec_env, quadruped_train_config
@@ -290,7 +290,6 @@ def chaos_study(cluster: Any, settings: Settings, seed: int, db: Path) -> dict[s
     import optuna
 
     from chronogym.optim import open_storage, run_parallel_study
-    from chronogym.optim.lander import LanderObjective, suggest_lander_design
     from chronogym.optim.parallel import finished_trials
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -438,8 +437,6 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args()
     settings = SHORT if args.short else FULL
-
-    from chronogym.cluster import LocalCluster
 
     with tempfile.TemporaryDirectory() as tmp, LocalCluster(workers=2, num_cpus=1) as cluster:
         cluster.connect()

@@ -1,6 +1,6 @@
 """RayVectorEnv on one Ray node vs a 3-node loopback cluster, and the equality checks.
 
-Both clusters are started with ``chronogym.cluster.LocalCluster`` (``ray start``
+Both clusters are started with ``chronogym.testing.LocalCluster`` (``ray start``
 subprocesses) with the same total CPUs: one node with 3 CPUs, or a head and two
 worker nodes with 1 CPU each. On them it times Go1 env-steps/s of RayVectorEnv
 (3 workers, one per CPU) and checks that
@@ -15,7 +15,7 @@ All nodes share this machine's cores: this measures the overhead of crossing
 raylets (object transfers between nodes' stores, remote scheduling), not a
 speed-up.
 
-    python benchmarks/vector/multinode.py [--quick] [--steps 400] [--out PATH]
+    python -m benchmarks.vector.multinode [--quick] [--steps 400] [--out PATH]
 
 Prints a table and writes ``benchmarks/results/multinode.json``.
 """
@@ -23,8 +23,8 @@ Prints a table and writes ``benchmarks/results/multinode.json``.
 from __future__ import annotations
 
 import argparse
+import csv
 import hashlib
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -32,8 +32,9 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, write_json
+from benchmarks.common import RESULTS, header, write_json
+from chronogym.optim.lander import LanderObjective, suggest_lander_design
+from chronogym.testing import LocalCluster
 
 DEFAULT_OUT = RESULTS / "multinode.json"
 GO1 = "chronogym/Go1Velocity-v0"
@@ -90,8 +91,6 @@ def ray_rollout(cluster: Any, steps: int) -> dict[str, Any]:
 
 def train_check(address: str, out: Path) -> dict[str, Any]:
     """train_quadruped for 2 iterations on the cluster and serially: same numbers?"""
-    import csv
-
     import torch
 
     from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
@@ -130,7 +129,6 @@ def lander_check(address: str, out: Path) -> dict[str, Any]:
     import optuna
 
     from chronogym.optim import open_storage, run_parallel_study
-    from chronogym.optim.lander import LanderObjective, suggest_lander_design
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     trials = {}
@@ -160,8 +158,6 @@ def lander_check(address: str, out: Path) -> dict[str, Any]:
 
 
 def run_cluster(label: str, workers: int, head_cpus: int, steps: int, checks: bool) -> dict:
-    from chronogym.cluster import LocalCluster
-
     started = time.perf_counter()
     with LocalCluster(workers=workers, num_cpus=1, head_cpus=head_cpus) as cluster:
         start_s = time.perf_counter() - started

@@ -9,9 +9,9 @@ Gymnasium's NEXT_STEP autoreset, as EnvPool does. Workloads: ``Ant-v5`` (Gymnasi
 episodes, so every step costs the same physics). EnvPool runs only the Gymnasium tasks it ships
 (Ant-v5); the rest, and every EnvPool row where envpool is not installed, are skipped with a note.
 
-    python benchmarks/vector/peers.py           # full run, about 4 min on 2 quiet cores
-    python benchmarks/vector/peers.py --quick   # smoke run: a few steps, one repeat
-    python benchmarks/vector/peers.py --ray-configs "envs_per_worker=8,transport=actor"
+    python -m benchmarks.vector.peers           # full run, about 4 min on 2 quiet cores
+    python -m benchmarks.vector.peers --quick   # smoke run: a few steps, one repeat
+    python -m benchmarks.vector.peers --ray-configs "envs_per_worker=8,transport=actor"
 
 Method: one seeded sequence of random actions (uniform over the action space) per workload,
 shared by every backend, so each does identical work: vector step ``t`` sends row ``t`` to
@@ -52,11 +52,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, pyplot, save_figure, settings, table, write_json
-from throughput_timing import start_ray as start_local_ray  # this script's folder
-
 import chronogym
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    pyplot,
+    save_figure,
+    settings,
+    table,
+    write_json,
+)
+from benchmarks.vector.throughput_timing import start_ray as start_local_ray  # this script's folder
 
 DEFAULT_OUT = RESULTS / "peers.json"
 RAY_SETTLE_S = 2.0  # let a fresh Ray cluster's processes finish starting before timing

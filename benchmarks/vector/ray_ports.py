@@ -7,7 +7,7 @@ driver, the head's services and two worker actors all run), then reads Linux's s
 records whether Ray's token authentication is on and whether a dashboard or metrics endpoint
 is up. Linux only (it reads ``/proc``).
 
-    python benchmarks/vector/ray_ports.py [--out benchmarks/results/ray_ports.json]
+    python -m benchmarks.vector.ray_ports [--out benchmarks/results/ray_ports.json]
 """
 
 from __future__ import annotations
@@ -19,8 +19,19 @@ import struct
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, proc_cmdline, proc_stat, table, versions, write_json
+if not __package__:  # run by path, as tests/test_security.py does: `benchmarks` is 2 folders up
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+import chronogym
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    proc_cmdline,
+    proc_stat,
+    table,
+    versions,
+    write_json,
+)
 
 DEFAULT_OUT = RESULTS / "ray_ports.json"
 LISTEN = "0A"  # TCP state LISTEN in /proc/net/tcp
@@ -132,8 +143,6 @@ def main() -> None:
     os.environ.pop("RAY_ADDRESS", None)  # a fresh local cluster, as chronogym starts it
 
     import ray
-
-    import chronogym
 
     vec = chronogym.RayVectorEnv("chronogym/CartPole-v0", 4, envs_per_worker=2)
     try:

@@ -5,12 +5,11 @@ SerialVectorEnv, gymnasium's AsyncVectorEnv and RayVectorEnv (workers x envs per
 worker), each at several physics costs per env step (``k`` ticks of ``dt`` = 2 ms).
 Prints an aligned table and writes JSON (default ``benchmarks/results/throughput.json``).
 
-    python benchmarks/vector/throughput.py            # default sweep, < 4 min on 2 cores
-    python benchmarks/vector/throughput.py --quick    # smoke run, < 1 min
-    python benchmarks/vector/throughput.py --async-k  # adds RayVectorEnv send/recv with K = N/2
-    python benchmarks/vector/throughput.py --transports actor socket   # RayVectorEnv transports
-    python benchmarks/vector/throughput.py --breakdown   # one vector step split into phases (µs)
-    python benchmarks/vector/throughput.py --background-load   # worker priority beside a busy job
+    python -m benchmarks.vector.throughput            # default sweep, < 4 min on 2 cores
+    python -m benchmarks.vector.throughput --quick    # smoke run, < 1 min
+    python -m benchmarks.vector.throughput --async-k  # adds RayVectorEnv send/recv with K = N/2
+    python -m benchmarks.vector.throughput --transports actor socket   # RayVectorEnv transports
+    python -m benchmarks.vector.throughput --breakdown   # one vector step split into phases (µs)
 
 Counting: the cart-pole runs with ``terminate=False`` (the pole may fall; episodes end
 only by truncation after 500 steps), so every env step costs the same physics and no
@@ -36,10 +35,6 @@ actions at once, against the barrier ``step`` of the same transport's rows. Thei
 The transports are ``socket`` (rows ``ray-sock``, RayVectorEnv's default) and ``actor``
 (``ray``).
 
-``--background-load`` replaces the sweep by 16 Go1 envs with Ray workers at nice 0
-(chronogym's default) and at Ray's nice 15, and serially, quiet and beside one busy process
-(``throughput_priority.py``).
-
 This file is the command line; the work is done by ``throughput_timing.py`` (the timed loops),
 ``throughput_sweep.py`` (the configurations), ``throughput_report.py`` (ratios, efficiency,
 goals, tables) and ``throughput_breakdown.py`` (``--breakdown``); ``common.py`` holds what every
@@ -53,17 +48,25 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, usable_cpus, write_json
-from throughput_breakdown import breakdown_record, run_breakdown
-from throughput_priority import format_priority, run_priority
-from throughput_report import derive, format_table, goal_table, notes, sweep_record
-from throughput_sweep import run_sweep
-from throughput_timing import DEFAULT_TRANSPORT, TRANSPORT_BACKENDS, measure_tick_us, start_ray
+from benchmarks.common import RESULTS, usable_cpus, write_json
+from benchmarks.vector.throughput_breakdown import breakdown_record, run_breakdown
+from benchmarks.vector.throughput_report import (
+    derive,
+    format_table,
+    goal_table,
+    notes,
+    sweep_record,
+)
+from benchmarks.vector.throughput_sweep import run_sweep
+from benchmarks.vector.throughput_timing import (
+    DEFAULT_TRANSPORT,
+    TRANSPORT_BACKENDS,
+    measure_tick_us,
+    start_ray,
+)
 
 DEFAULT_OUT = RESULTS / "throughput.json"
 BREAKDOWN_OUT = DEFAULT_OUT.with_name("throughput_breakdown.json")
-PRIORITY_OUT = DEFAULT_OUT.with_name("throughput_priority.json")
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -131,21 +134,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help=f"JSON output (default {DEFAULT_OUT.name}; --breakdown: {BREAKDOWN_OUT.name})",
     )
-    parser.add_argument(
-        "--background-load",
-        action="store_true",
-        help="Ray workers at nice 0 vs 15 (and serial), quiet and beside a busy process",
-    )
-    parser.add_argument("--rounds", type=int, default=2, help="--background-load: rounds")
     args = parser.parse_args(argv)
     if args.out is None:
-        args.out = (
-            PRIORITY_OUT
-            if args.background_load
-            else BREAKDOWN_OUT
-            if args.breakdown
-            else DEFAULT_OUT
-        )
+        args.out = BREAKDOWN_OUT if args.breakdown else DEFAULT_OUT
     if args.transports is None and not args.breakdown:
         args.transports = [DEFAULT_TRANSPORT]
     if args.quick:
@@ -160,8 +151,6 @@ def main(argv: list[str] | None = None) -> int:
     """Run the sweep (or the breakdown), print the tables, write the JSON."""
     args = parse_args(argv)
     wall = time.perf_counter()
-    if args.background_load:
-        return main_priority(args, wall)
     tick_us = measure_tick_us(max(args.seconds, 0.3), args.seed)
     if args.breakdown:
         return main_breakdown(args, tick_us, wall)
@@ -180,17 +169,6 @@ def main(argv: list[str] | None = None) -> int:
         sweep_record(args, tick_us, results),
         f" ({time.perf_counter() - wall:.0f} s in all)",
     )
-    return 0
-
-
-def main_priority(args: argparse.Namespace, wall: float) -> int:
-    """The --background-load mode: worker priority beside a busy process, and its JSON."""
-    seconds = max(args.seconds, 3.0)
-    rows = run_priority(seconds, args.rounds)
-    print()
-    print(format_priority(rows))
-    record = {**header("throughput_priority"), "seconds": seconds, "rounds": args.rounds}
-    write_json(args.out, {**record, "rows": rows}, f" ({time.perf_counter() - wall:.0f} s)")
     return 0
 
 

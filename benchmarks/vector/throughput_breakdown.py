@@ -16,16 +16,16 @@ import math
 import sys
 import time
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from tqdm import tqdm
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import Column, cpu_percent, header, settings, table
-from throughput_report import ok
-from throughput_timing import (
+import chronogym
+from benchmarks.common import Column, cpu_percent, header, settings, table
+from benchmarks.vector.throughput_report import ok
+from benchmarks.vector.throughput_timing import (
     DEFAULT_TRANSPORT,
     ENV_ID,
     SHAPE_COLUMNS,
@@ -34,9 +34,6 @@ from throughput_timing import (
     choose_levels,
     time_vector_env,
 )
-from tqdm import tqdm
-
-import chronogym
 
 
 @dataclass

@@ -10,15 +10,18 @@ physics) and the JSON record.
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import asdict
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import Column, header, settings, table
-from throughput_sweep import VECTOR_BACKENDS, Result
-from throughput_timing import DEFAULT_TRANSPORT, DT, ENV_ID, SHAPE_COLUMNS, TASK_KWARGS
+from benchmarks.common import Column, header, settings, table
+from benchmarks.vector.throughput_sweep import VECTOR_BACKENDS, Result
+from benchmarks.vector.throughput_timing import (
+    DEFAULT_TRANSPORT,
+    DT,
+    ENV_ID,
+    SHAPE_COLUMNS,
+    TASK_KWARGS,
+)
 
 
 def derive(results: list[Result], cpus: int) -> None:

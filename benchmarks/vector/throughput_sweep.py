@@ -16,7 +16,10 @@ import time
 from dataclasses import dataclass, field
 
 import gymnasium as gym
-from throughput_timing import (
+from tqdm import tqdm
+
+import chronogym
+from benchmarks.vector.throughput_timing import (
     DEFAULT_TRANSPORT,
     ENV_ID,
     RAW_MIN_SECONDS,
@@ -30,9 +33,6 @@ from throughput_timing import (
     time_async_env,
     time_vector_env,
 )
-from tqdm import tqdm
-
-import chronogym
 
 BACKEND_TRANSPORTS = {row: transport for transport, row in TRANSPORT_BACKENDS.items()}
 VECTOR_BACKENDS = ("serial", "async", "ray", "ray-sock", "ray-async")

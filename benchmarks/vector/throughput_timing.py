@@ -10,18 +10,15 @@ Ray cluster a run uses.
 from __future__ import annotations
 
 import os
-import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import Column
-
+from benchmarks.common import Column
+from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
 from chronogym.tasks.cartpole import CartPoleTask
 from chronogym.vector.ray_vector_env import default_transport
 
@@ -190,8 +187,6 @@ def start_ray() -> None:
     """One local Ray cluster for the whole run, its workers at chronogym's nice value (0), as
     ``chronogym.ray_runtime.ensure_ray`` starts one; RayVectorEnv then reuses it."""
     import ray
-
-    from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
 
     extra = worker_niceness_env(WORKER_NICENESS)
     os.environ.update(extra)  # read by the raylet that ray.init starts

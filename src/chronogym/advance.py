@@ -41,6 +41,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from chronogym.validation import check_positive
+
 
 @dataclass(frozen=True)
 class Synced:
@@ -69,9 +71,7 @@ class Advancer:
     def __init__(self, advanceables: Sequence[Any], dt: float) -> None:
         if isinstance(advanceables, (str, bytes)) or not isinstance(advanceables, Sequence):
             raise TypeError(f"advanceables={advanceables!r}: expected a list of objects to step")
-        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < float("inf"):
-            raise ValueError(f"dt={dt!r}: expected a finite float > 0")
-        self.dt = float(dt)
+        self.dt = check_positive("dt", dt, "a finite float > 0")
         self._sync: list[Callable[[float], None]] = []
         self._step: list[Callable[[], None]] = []
         self.plan: list[str] = []

@@ -12,6 +12,8 @@ import sys
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any, NoReturn
 
+from chronogym.optim.lander import ENGINES as LANDER_ENGINES
+from chronogym.optim.lander import TERRAINS as LANDER_TERRAINS
 from chronogym.tasks.quadruped.engines import ALL_TERRAINS, ENGINES
 
 DEFAULT_STORAGE = "sqlite:///chronogym-optuna.db"
@@ -108,6 +110,34 @@ class AtLeast(argparse.Action):
         setattr(namespace, self.dest, value)
 
 
+class OneOf(argparse.Action):
+    """Stores a value after checking it against a fixed set, each choice with its meaning.
+
+    The error names the flag, the value as typed and what each choice means:
+    ``--policy-lag=2: expected 0 (synchronous PPO) or 1 (update overlapped ...)``.
+    """
+
+    def __init__(
+        self, option_strings: list[str], dest: str, *, meanings: dict[Any, str], **kwargs: Any
+    ) -> None:
+        kwargs.setdefault("metavar", "{" + ",".join(map(str, meanings)) + "}")
+        super().__init__(option_strings, dest, **kwargs)
+        self.meanings = meanings
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        value: Any,
+        option_string: str | None = None,
+    ) -> None:
+        if value not in self.meanings:
+            *rest, last = [f"{choice} ({meaning})" for choice, meaning in self.meanings.items()]
+            expected = f"{', '.join(rest)} or {last}" if rest else last
+            parser.error(f"{option_string}={value}: expected {expected}")
+        setattr(namespace, self.dest, value)
+
+
 def installed_version() -> str:
     """chronogym's version as installed (its package metadata)."""
     try:
@@ -161,13 +191,13 @@ def add_demo(sub: Any) -> None:
 
 
 def add_optimize(sub: Any) -> None:
-    from chronogym.optim.lander import ENGINES, TERRAINS
-
     opt = add_command(sub, "optimize")
     opt.add_argument("problem", choices=["lander"], help="the design problem")
     add_int(opt, "--workers", 2, "trials run in parallel")
     add_int(opt, "--trials", 40, "finished trials wanted in the study")
-    opt.add_argument("--terrain", default="rigid", choices=list(TERRAINS), help="landing ground")
+    opt.add_argument(
+        "--terrain", default="rigid", choices=list(LANDER_TERRAINS), help="landing ground"
+    )
     opt.add_argument(
         "--storage",
         default=DEFAULT_STORAGE,
@@ -176,7 +206,7 @@ def add_optimize(sub: Any) -> None:
     opt.add_argument(
         "--engine",
         default="mujoco",
-        choices=list(ENGINES),
+        choices=list(LANDER_ENGINES),
         help="physics engine (mujoco: rigid, rough, soil; chrono: rigid, scm; needs PyChrono)",
     )
     opt.add_argument("--study", help="study name (default: lander-TERRAIN, +-chrono for Chrono)")
@@ -225,6 +255,8 @@ def add_train(sub: Any) -> None:
         "--policy-lag",
         type=int,
         default=0,
+        action=OneOf,
+        meanings={0: "synchronous PPO", 1: "update overlapped with the next rollout"},
         help="0 (default): synchronous PPO, the update on every core while the simulations "
         "wait; 1: run each update while the next rollout is collected, one update stale",
     )

@@ -11,6 +11,7 @@ import numpy as np
 from chronogym.actions import check_invalid_action_mode, prepare_action
 from chronogym.advance import Advancer
 from chronogym.task import Task, check_task_definition, check_task_spaces
+from chronogym.validation import check_int
 
 
 def _all_finite(value: Any) -> bool:
@@ -87,14 +88,8 @@ class SimEnv(gym.Env):
     ) -> None:
         check_task_definition(task)
         check_invalid_action_mode(invalid_action)
-        if max_episode_steps is not None and (
-            isinstance(max_episode_steps, bool)
-            or not isinstance(max_episode_steps, (int, np.integer))
-            or max_episode_steps < 1
-        ):
-            raise ValueError(
-                f"max_episode_steps={max_episode_steps!r}: expected None or an integer >= 1"
-            )
+        if max_episode_steps is not None:
+            check_int("max_episode_steps", max_episode_steps, 1, expected="None or an integer >= 1")
         render_modes = _usable_render_modes(task, render_mode)  # before init(): fail early
         self.task = task
         self.invalid_action = invalid_action

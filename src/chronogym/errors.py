@@ -11,6 +11,15 @@ class ChronogymError(Exception):
     """Base class of every error chronogym raises on purpose."""
 
 
+class BoolArgumentError(ChronogymError, TypeError, ValueError):
+    """A bool where a number was expected, or anything but a bool where a bool was expected.
+
+    Raised by every check of :mod:`chronogym.validation` (``check_bool``, and ``check_int`` /
+    ``check_number`` / ``check_positive`` given ``True`` or ``False``). Both a ``TypeError`` and
+    a ``ValueError``, so either ``except`` catches it.
+    """
+
+
 class TaskDefinitionError(ChronogymError, TypeError):
     """A Task lacks a required piece or declares an invalid one."""
 

@@ -41,6 +41,9 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
 #: Nice value of the worker processes of a Ray cluster that chronogym starts. Ray's own
 #: default (``RAY_worker_niceness``) is 15: its workers then lose their cores to any busy
 #: process of normal priority, the driver included (README "Worker priority").
+#: Measured by benchmarks/archive/throughput_priority.py (results/throughput_priority.json,
+#: 16 Go1 envs, 2 workers, 2 cores): quiet, nice 0 gave 6,544 env-steps/s against 6,073 at
+#: nice 15; beside one busy process 4,096 against 4,770 (why was not measured).
 WORKER_NICENESS = 0
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+import gymnasium as gym
+
 if TYPE_CHECKING:
     from chronogym.env import SimEnv
     from chronogym.task import Task
@@ -40,7 +42,7 @@ def make_sim_env(
     **task_kwargs: Any,
 ) -> SimEnv:
     """Build a SimEnv from a Task class (or its import path) and its keyword arguments."""
-    from chronogym.env import SimEnv
+    from chronogym.env import SimEnv  # here: `import chronogym` registers ids, loads no env
 
     task_cls = load_task_class(task) if isinstance(task, str) else task
     return SimEnv(
@@ -53,8 +55,6 @@ def make_sim_env(
 
 def register_task(env_id: str, task: str | type[Task], **default_kwargs: Any) -> None:
     """Register a Task under a Gymnasium id; keyword arguments of ``make`` reach the Task."""
-    import gymnasium as gym
-
     if env_id in gym.registry:
         return
     gym.register(

@@ -6,12 +6,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from chronogym.validation import is_int
+
 
 def vector_seeds(seed: int | Sequence[int | None] | None, num_envs: int) -> list[int | None]:
     """Per-env reset seeds, as Gymnasium's vector envs do: int s -> [s, s+1, ...]."""
     if seed is None:
         return [None] * num_envs
-    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+    if is_int(seed):
         return [int(seed) + i for i in range(num_envs)]
     if isinstance(seed, (list, tuple, np.ndarray)):
         seeds = list(seed)

@@ -24,9 +24,11 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from chronogym.errors import TaskDefinitionError
+from chronogym.validation import invalid, is_int, is_number
 
 REQUIRED_METHODS = ("init", "reset", "apply_action", "observe", "reward", "terminated")
 # What ``SimEnv.render()`` can return: ``task.render()`` takes no mode, so one mode at most.
@@ -124,19 +126,18 @@ def check_task_definition(task: Task) -> None:
             f"every Task must define {', '.join(REQUIRED_METHODS)}"
         )
     dt = getattr(task, "dt", None)
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
-        raise ValueError(f"Task {type(task).__name__}: dt={dt!r}, expected a finite float > 0")
+    if not (is_number(dt) and math.isfinite(dt) and dt > 0):
+        raise invalid(f"Task {type(task).__name__}: dt={dt!r}, expected a finite float > 0", dt)
     k = getattr(task, "k", None)
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise ValueError(f"Task {type(task).__name__}: k={k!r}, expected an integer >= 1")
+    if not (is_int(k) and k >= 1):
+        raise invalid(f"Task {type(task).__name__}: k={k!r}, expected an integer >= 1", k)
     check_render_modes(task)
     steps = task.max_episode_steps
-    if steps is not None and (
-        isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1
-    ):
-        raise ValueError(
+    if steps is not None and not (is_int(steps) and steps >= 1):
+        raise invalid(
             f"Task {type(task).__name__}: max_episode_steps={steps!r}, "
-            "expected None or an integer >= 1"
+            "expected None or an integer >= 1",
+            steps,
         )
 
 
@@ -157,8 +158,6 @@ def check_render_modes(task: Task) -> None:
 
 def check_task_spaces(task: Task) -> None:
     """Raise TaskDefinitionError when ``init`` left the spaces undefined."""
-    import gymnasium as gym
-
     for name in ("observation_space", "action_space"):
         space = getattr(task, name, None)
         if not isinstance(space, gym.spaces.Space):

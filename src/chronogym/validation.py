@@ -1,4 +1,9 @@
-"""Argument checks shared across chronogym: each error names the value and what was expected."""
+"""Argument checks shared across chronogym: each error names the value and what was expected.
+
+A bad value raises ``ValueError``; a bool where a number belongs, or a non-bool where a bool
+belongs, raises :class:`~chronogym.errors.BoolArgumentError` (a ``TypeError`` and a
+``ValueError``), the one class every bool check uses.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,8 @@ import math
 from typing import Any
 
 import numpy as np
+
+from chronogym.errors import BoolArgumentError
 
 
 def show(value: Any, limit: int = 80) -> str:
@@ -26,6 +33,16 @@ def is_number(value: Any) -> bool:
     )
 
 
+def is_bool(value: Any) -> bool:
+    """A bool (Python or NumPy)."""
+    return isinstance(value, (bool, np.bool_))
+
+
+def invalid(message: str, value: Any) -> ValueError:
+    """The error for a failed check of ``value``: :class:`BoolArgumentError` if it is a bool."""
+    return BoolArgumentError(message) if is_bool(value) else ValueError(message)
+
+
 def _bounds(name: str, low: float | None, high: float | None, kind: str) -> str:
     if low is not None and high is not None:
         return f"{kind} with {low:g} <= {name} <= {high:g}"
@@ -43,7 +60,8 @@ def check_int(
     high: int | None = None,
     expected: str | None = None,
 ) -> int:
-    """``value`` as an int, if it is an integer in ``[low, high]``; else a ValueError.
+    """``value`` as an int, if it is an integer in ``[low, high]``; else a ValueError
+    (:class:`BoolArgumentError` for a bool).
 
     ``expected`` replaces the generated "an integer >= low" in the message.
     """
@@ -51,7 +69,7 @@ def check_int(
     too_high = high is not None and is_int(value) and value > high
     if not is_int(value) or too_low or too_high:
         what = expected or _bounds(name, low, high, "an integer")
-        raise ValueError(f"{name}={show(value)}: expected {what}")
+        raise invalid(f"{name}={show(value)}: expected {what}", value)
     return int(value)
 
 
@@ -62,7 +80,8 @@ def check_number(
     high: float | None = None,
     expected: str | None = None,
 ) -> float:
-    """``value`` as a float, if it is a finite number in ``[low, high]``; else a ValueError."""
+    """``value`` as a float, if it is a finite number in ``[low, high]``; else a ValueError
+    (:class:`BoolArgumentError` for a bool)."""
     if (
         not is_number(value)
         or not math.isfinite(value)
@@ -70,19 +89,22 @@ def check_number(
         or (high is not None and value > high)
     ):
         what = expected or _bounds(name, low, high, "a finite number")
-        raise ValueError(f"{name}={show(value)}: expected {what}")
+        raise invalid(f"{name}={show(value)}: expected {what}", value)
     return float(value)
 
 
 def check_positive(name: str, value: Any, expected: str | None = None) -> float:
-    """``value`` as a float, if it is a finite number > 0; else a ValueError."""
+    """``value`` as a float, if it is a finite number > 0; else a ValueError
+    (:class:`BoolArgumentError` for a bool)."""
     if not is_number(value) or not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name}={show(value)}: expected {expected or 'a finite number > 0'}")
+        what = expected or "a finite number > 0"
+        raise invalid(f"{name}={show(value)}: expected {what}", value)
     return float(value)
 
 
 def check_bool(name: str, value: Any) -> bool:
-    """``value`` if it is a bool; else a TypeError."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name}={show(value)}: expected True or False")
+    """``value`` if it is a bool; else a :class:`BoolArgumentError` (a TypeError and a
+    ValueError)."""
+    if not is_bool(value):
+        raise BoolArgumentError(f"{name}={show(value)}: expected True or False")
     return bool(value)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from chronogym.cluster import LocalCluster, ray_start_available
+from chronogym.testing import LocalCluster, ray_start_available
 
 _UNAVAILABLE = ray_start_available()
 pytestmark = pytest.mark.skipif(

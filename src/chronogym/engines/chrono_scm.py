@@ -21,6 +21,7 @@ import numpy as np
 
 from chronogym.engines.chrono import INSTALL_HINT, import_pychrono, vec3
 from chronogym.terrain.params import SoilParameters
+from chronogym.validation import is_number
 
 __all__ = ["ChronoSCM", "chrono_soil_arguments", "import_chrono_vehicle"]
 
@@ -56,12 +57,7 @@ def import_chrono_vehicle() -> Any:
 
 
 def _positive(value: Any) -> bool:
-    return (
-        isinstance(value, (int, float))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and value > 0
-    )
+    return is_number(value) and math.isfinite(value) and value > 0
 
 
 class ChronoSCM:

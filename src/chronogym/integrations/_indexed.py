@@ -15,6 +15,8 @@ from typing import Any
 
 import gymnasium as gym
 
+import chronogym  # noqa: F401  (registers the chronogym/... ids in this process)
+
 INDEX_ATTR = "chronogym_env_index"
 HOOK = "chronogym_sb3_op"
 OPS = ("call", "get", "has", "set", "is_wrapped", "identity")
@@ -61,8 +63,6 @@ class IndexedEnv(gym.Wrapper):
 
 def make_indexed_env(env_id: str, index: int, env_kwargs: dict[str, Any] | None) -> IndexedEnv:
     """``gymnasium.make(env_id, **env_kwargs)`` wrapped in :class:`IndexedEnv`."""
-    import chronogym  # noqa: F401  (registers the chronogym/... ids in this process)
-
     return IndexedEnv(gym.make(env_id, **(env_kwargs or {})), index)
 
 

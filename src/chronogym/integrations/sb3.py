@@ -50,7 +50,7 @@ from chronogym.integrations._indexed import (
     make_indexed_env,
 )
 from chronogym.integrations._sb3_batches import batch_actions, sb3_obs, split_info
-from chronogym.validation import check_int
+from chronogym.validation import check_int, is_int
 from chronogym.vector.factory import BACKENDS
 
 __all__ = [
@@ -311,12 +311,7 @@ class SB3VecEnv(VecEnv):
             chosen = list(items)  # type: ignore[arg-type]
         except TypeError:
             chosen = None
-        bad = chosen is None or any(
-            isinstance(i, (bool, np.bool_))
-            or not isinstance(i, (int, np.integer))
-            or not 0 <= i < n
-            for i in chosen
-        )
+        bad = chosen is None or any(not is_int(i) or not 0 <= i < n for i in chosen)
         if bad or len(set(chosen)) != len(chosen):  # type: ignore[arg-type]
             raise ValueError(
                 f"indices={indices!r}: expected None, an env index or a sequence of distinct env "

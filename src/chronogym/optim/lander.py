@@ -6,6 +6,10 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from chronogym.engines.chrono import import_pychrono
+from chronogym.engines.chrono_scm import import_chrono_vehicle
+from chronogym.optim.parallel import TrialFailure
+
 LANDER_METRICS = (
     "a_max",
     "a_ref",
@@ -58,9 +62,6 @@ def check_engine(engine: str, terrain: str) -> None:
         )
     if engine != "chrono":
         return
-    from chronogym.engines.chrono import import_pychrono
-    from chronogym.engines.chrono_scm import import_chrono_vehicle
-
     try:
         import_pychrono()
         if terrain == "scm":
@@ -123,7 +124,6 @@ class LanderEvaluator:
         self.sim: Any = None
 
     def __call__(self, params: dict[str, Any]) -> tuple[float, dict[str, Any]]:
-        from chronogym.optim.parallel import TrialFailure
         from chronogym.tasks.lander import LanderDesign
 
         design = LanderDesign(**params)

@@ -1,9 +1,10 @@
 """Keep the best checkpoint of a training run: ``best.pt`` and ``best.json``.
 
 At every save point the :class:`~chronogym.rl.trainer.Runner` hands the new checkpoint to an
-evaluator (for the Go1, :class:`~chronogym.tasks.quadruped.evaluation.WalkingEvaluator`), which returns a
-score; :class:`BestCheckpoint` copies the checkpoint to ``best.pt`` whenever its score beats
-every earlier one and records why in ``best.json``.
+evaluator (for the Go1,
+:class:`~chronogym.tasks.quadruped.evaluation.WalkingEvaluator`), which returns a score;
+:class:`BestCheckpoint` copies the checkpoint to ``best.pt`` whenever its score beats every
+earlier one and records why in ``best.json``.
 """
 
 from __future__ import annotations

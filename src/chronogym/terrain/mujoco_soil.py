@@ -49,6 +49,7 @@ import numpy as np
 
 from chronogym.terrain.params import SoilParameters, soil_preset
 from chronogym.terrain.scm import ScmLaw, SoilGrid
+from chronogym.validation import check_bool, check_positive, is_int
 
 __all__ = ["MujocoSoil", "exclude_ground_contacts"]
 
@@ -88,7 +89,7 @@ def _horizontal_reach(kind: int, size: np.ndarray) -> float:
 def _object_id(model: Any, kind: str, key: str | int, count: int) -> int:
     import mujoco
 
-    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+    if is_int(key):
         if 0 <= int(key) < count:
             return int(key)
         raise ValueError(f"{kind} id {key!r}: expected an int in [0, {count})")
@@ -223,22 +224,14 @@ class MujocoSoil:
                 f"model={type(model).__name__}, data={type(data).__name__}: expected a "
                 "mujoco.MjModel and its mujoco.MjData"
             )
-        if (
-            isinstance(resolution, bool)
-            or not isinstance(resolution, (int, float))
-            or not 0 < resolution < math.inf
-        ):
-            raise ValueError(f"resolution={resolution!r}: expected a finite float > 0 (m)")
-        res = float(resolution)
+        res = check_positive("resolution", resolution, "a finite float > 0 (m)")
         self.model, self.data = model, data
         self.params = soil_preset(params) if isinstance(params, str) else params
         if not isinstance(self.params, SoilParameters):
             raise ValueError(f"params={params!r}: expected a SoilParameters or a preset name")
         geom_ids, skipped = _resolve_geoms(model, bodies, geoms)
         self.skipped_geoms = [model.geom(g).name or f"#{g}" for g in skipped]
-        if not isinstance(bulldozing, bool):
-            raise ValueError(f"bulldozing={bulldozing!r}: expected True or False")
-        self.bulldozing = bulldozing
+        self.bulldozing = bulldozing = check_bool("bulldozing", bulldozing)
         rim = 1 if bulldozing else 0
         # Geoms in a fixed order (type, block width, id): the first wins a node on a tie.
         widths = {}

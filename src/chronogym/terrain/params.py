@@ -13,6 +13,8 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from chronogym.validation import invalid, is_number
+
 __all__ = ["SOIL_PRESETS", "SoilParameters", "soil_preset"]
 
 # (field, lower bound, lower bound allowed, upper bound or None, unit) for the range checks.
@@ -55,8 +57,8 @@ class SoilParameters:
             expected = f"{'>=' if low_ok else '>'} {low:g}{unit_text}"
             if high is not None:
                 expected += f" and < {high:g}{unit_text}"
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ValueError(f"{name}={value!r}: expected a finite real number {expected}")
+            if not is_number(value):
+                raise invalid(f"{name}={value!r}: expected a finite real number {expected}", value)
             value = float(value)
             in_range = (value >= low if low_ok else value > low) and (high is None or value < high)
             if not math.isfinite(value) or not in_range:

@@ -49,6 +49,7 @@ import numpy as np
 
 from chronogym.terrain.archive import TileArchive
 from chronogym.terrain.params import SoilParameters
+from chronogym.validation import check_int, check_positive
 
 __all__ = ["ScmLaw", "SoilGrid", "patch_inverse_width"]
 
@@ -58,11 +59,7 @@ _MAX_NODES = 50_000_000
 
 
 def _positive(name: str, value: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{name}={value!r}: expected a finite float > 0")
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name}={value!r}: expected a finite float > 0")
-    return float(value)
+    return check_positive(name, value, "a finite float > 0")
 
 
 def _pair(name: str, value: Sequence[float], positive: bool = False) -> tuple[float, float]:
@@ -103,8 +100,7 @@ class SoilGrid:
                 f"extent={tuple(extent)!r} at resolution={resolution!r} gives {nx} x {ny} nodes; "
                 f"expected at most {_MAX_NODES} (coarser resolution or smaller extent)"
             )
-        if isinstance(margin, bool) or not isinstance(margin, int) or margin < 0:
-            raise ValueError(f"margin={margin!r}: expected an int >= 0")
+        margin = check_int("margin", margin, 0, expected="an int >= 0")
         self.shape = (nx, ny)
         self.margin = margin
         self.stride = ny + 2 * margin
@@ -159,11 +155,6 @@ class SoilGrid:
     def reset_level(self) -> np.ndarray:
         """The initial surface heights, ``(nx, ny)`` (read-only)."""
         return self.interior(self._reset_level)
-
-    @property
-    def plastic_level(self) -> np.ndarray:
-        """Surface height once unloaded (``level0 - plastic``), ``(nx, ny)`` copy."""
-        return self.interior(self.level0) - self.interior(self.plastic)
 
     def shift(self, di: int, dj: int) -> int:
         """Move the window by ``(di, dj)`` nodes; returns the change of a node's flat index.

@@ -61,7 +61,7 @@ STEP_METHOD = "step_packed"  # the driver's step method this backend sends over 
 ACCEPT_TIMEOUT_S = 30.0  # a worker stops listening if the driver never connects
 DEATH_PROBE_S = 10.0  # how long to ask Ray why a worker whose socket broke died
 #: Default cap on the spin before a blocking read, µs (see the module docstring);
-#: chosen with benchmarks/vector/socket_spin.py.
+#: chosen with benchmarks/archive/socket_spin.py (results/socket_spin.json).
 DEFAULT_SPIN_US = 250.0
 MIXED_POLL_S = 1e-3  # recv over socket and actor-call workers: how often to look at each
 

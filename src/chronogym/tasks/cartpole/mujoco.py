@@ -18,6 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from chronogym.engines.mujoco import MujocoTask
+from chronogym.validation import check_bool
 
 XML_PATH = Path(__file__).with_name("cartpole.xml")
 
@@ -39,9 +40,7 @@ class CartPoleTask(MujocoTask):
     ) -> None:
         if not reset_noise >= 0:
             raise ValueError(f"reset_noise={reset_noise!r}: expected a float >= 0")
-        if not isinstance(terminate, bool):
-            raise ValueError(f"terminate={terminate!r}: expected True or False")
-        self.terminate = terminate
+        self.terminate = check_bool("terminate", terminate)
         self.dt = dt
         self.k = k
         self.max_episode_steps = max_episode_steps

@@ -33,6 +33,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from chronogym.validation import invalid, is_number
+
 __all__ = [
     "DEFAULT_DESIGN",
     "DESIGN_BOUNDS",
@@ -317,8 +319,8 @@ class LanderParams:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"{f.name}={value!r} must be a finite number")
+            if not (is_number(value) and math.isfinite(value)):
+                raise invalid(f"{f.name}={value!r} must be a finite number", value)
         positive = [
             f.name
             for f in fields(self)

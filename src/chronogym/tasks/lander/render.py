@@ -15,6 +15,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from chronogym.engines.mujoco import check_headless_gl
+
 __all__ = ["LanderRenderer", "pose_bodies"]
 
 
@@ -50,8 +52,6 @@ class LanderRenderer:
     """Offscreen frames of a lander model: ``frame(data)`` -> (height, width, 3) uint8."""
 
     def __init__(self, model: mujoco.MjModel, width: int = 480, height: int = 360) -> None:
-        from chronogym.engines.mujoco import check_headless_gl
-
         check_headless_gl()
         self.model = model
         self.size = (width, height)

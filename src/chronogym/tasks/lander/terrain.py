@@ -12,14 +12,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from chronogym.tasks.lander.design import LanderParams
-
-if TYPE_CHECKING:
-    from chronogym.terrain.params import SoilParameters
+from chronogym.terrain.params import SoilParameters, soil_preset
+from chronogym.validation import check_positive
 
 __all__ = ["Terrain", "terrain_params"]
 
@@ -70,8 +68,6 @@ class Terrain:
 
     def _check_soil(self) -> None:
         """Validate the soil fields: preset name or parameters, level ground, grid size."""
-        from chronogym.terrain.params import SoilParameters, soil_preset
-
         if isinstance(self.soil, str):
             soil_preset(self.soil)  # raises naming the preset and the valid names
         elif not isinstance(self.soil, SoilParameters):
@@ -85,8 +81,7 @@ class Terrain:
             )
         for name in ("soil_extent", "soil_resolution"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not 0.0 < value < math.inf:
-                raise ValueError(f"{name}={value!r}: expected a finite number > 0 (m)")
+            check_positive(name, value, "a finite number > 0 (m)")
         if self.soil_resolution > self.soil_extent / 10:
             raise ValueError(
                 f"soil_resolution={self.soil_resolution!r}: expected at most soil_extent / 10 "

@@ -46,12 +46,14 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from chronogym.engines.chrono import chrono_frame, chrono_quaternion, chrono_vector
+from chronogym.engines.chrono import chrono_frame, chrono_quaternion, chrono_vector, import_pychrono
+from chronogym.engines.chrono_scm import ChronoSCM
 from chronogym.tasks.lander.chrono.struts import StrutForces, stop_coefficients
 from chronogym.tasks.lander.design import LanderDesign, LanderParams
 from chronogym.tasks.lander.geometry import N_LEGS, leg_geometry, quat_from_axes
 from chronogym.tasks.lander.mujoco.model import build_lander_model
 from chronogym.tasks.lander.terrain import Terrain
+from chronogym.terrain.params import soil_preset
 
 __all__ = [
     "CHRONO_TERRAIN",
@@ -224,8 +226,6 @@ def build_chrono_lander(
 
     The caller sets the touchdown velocity (``ChronoLanderSim.reset``).
     """
-    from chronogym.engines.chrono import import_pychrono
-
     chrono = import_pychrono()
     terrain = check_chrono_terrain(terrain)
     settings = settings if settings is not None else ChronoSettings()
@@ -381,9 +381,6 @@ def _add_soil(
     pad_boxes: list[tuple[Any, np.ndarray, np.ndarray]],
 ) -> Any:
     """Chrono's SCM soil with the terrain's preset, active around each pad."""
-    from chronogym.engines.chrono_scm import ChronoSCM
-    from chronogym.terrain.params import soil_preset
-
     params = soil_preset(terrain.soil) if isinstance(terrain.soil, str) else terrain.soil
     side = float(terrain.soil_extent)
     return ChronoSCM(system, params, (side, side), float(terrain.soil_resolution), pad_boxes)

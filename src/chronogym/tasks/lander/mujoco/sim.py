@@ -159,7 +159,7 @@ The ledger costs about 14 us per tick (~14 % of a landing).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -169,10 +169,9 @@ from chronogym.tasks.lander.design import DEFAULT_DESIGN, LanderDesign, LanderPa
 from chronogym.tasks.lander.geometry import N_LEGS
 from chronogym.tasks.lander.landing import Landing
 from chronogym.tasks.lander.mujoco.model import LanderModelInfo, build_lander_model
+from chronogym.tasks.lander.render import LanderRenderer
 from chronogym.tasks.lander.terrain import Terrain, terrain_params
-
-if TYPE_CHECKING:
-    from chronogym.terrain import MujocoSoil
+from chronogym.terrain import MujocoSoil
 
 __all__ = ["LEDGER_TERMS", "LanderSim", "simulate_landing"]
 
@@ -301,8 +300,6 @@ class LanderSim(Landing):
         terrain = self.terrain
         if terrain.soil is None:
             return None
-        from chronogym.terrain import MujocoSoil
-
         self._check_pads_on_soil()
         bodies = ["chassis", *(f"pad_{i}" for i in range(N_LEGS))]
         side = float(terrain.soil_extent)
@@ -427,8 +424,6 @@ class LanderSim(Landing):
     def render(self, width: int = 480, height: int = 360) -> np.ndarray:
         """An offscreen picture of the lander now, (height, width, 3) uint8 (needs EGL or
         OSMesa; :class:`~..render.LanderRenderer`)."""
-        from chronogym.tasks.lander.render import LanderRenderer
-
         renderer = getattr(self, "_renderer", None)
         if renderer is None or renderer.model is not self.model or renderer.size != (width, height):
             renderer = self._renderer = LanderRenderer(self.model, width, height)

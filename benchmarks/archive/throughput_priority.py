@@ -1,24 +1,33 @@
-"""``throughput.py --background-load``: Ray workers' priority beside a busy process.
+"""Ray workers' priority beside a busy process (archived probe; it set ``WORKER_NICENESS``).
 
 Steps 16 Go1 envs (2 Ray workers x 8, random actions) with the workers at nice 0
 (chronogym's default for a cluster it starts) and at Ray's own nice 15, and serially, each
 quiet and beside one busy process of normal priority (a Python spin loop, as a compile job
 or a second experiment would be). Every measurement runs in its own subprocess with its own
 local Ray, so the niceness is set when that cluster starts; rounds alternate the order.
+Prints a table and writes ``benchmarks/results/throughput_priority.json``.
+
+    python -m benchmarks.archive.throughput_priority [--seconds 3] [--rounds 2]   # about 3 min
+
+(Until issue 31 this was ``throughput.py --background-load``.)
 """
 
 from __future__ import annotations
 
+import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import Column, table
+from benchmarks.common import RESULTS, Column, header, table, write_json
+
+DEFAULT_OUT = RESULTS / "throughput_priority.json"
 
 #: (label, backend, worker_niceness) measured; None is Ray's default (15).
 CONFIGS = (("serial", "serial", 0), ("ray nice 0", "ray", 0), ("ray nice 15", "ray", None))
@@ -71,8 +80,6 @@ def measure(backend: str, niceness: int | None, seconds: float) -> dict[str, Any
 
 
 def _environ() -> dict[str, str]:
-    import os
-
     return {k: v for k, v in os.environ.items() if k != "RAY_worker_niceness"}
 
 
@@ -112,3 +119,24 @@ def format_priority(rows: list[dict[str, Any]]) -> str:
         Column("x serial", 8, "{:.2f}", key="loaded_vs_serial"),
     ]
     return table(columns, rows, rule=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Measure every config quiet and loaded, print the table, write the JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="timed wall time per config")
+    parser.add_argument("--rounds", type=int, default=2, help="rounds, alternating the order")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON output")
+    args = parser.parse_args(argv)
+    wall = time.perf_counter()
+    seconds = max(args.seconds, 3.0)
+    rows = run_priority(seconds, args.rounds)
+    print()
+    print(format_priority(rows))
+    record = {**header("throughput_priority"), "seconds": seconds, "rounds": args.rounds}
+    write_json(args.out, {**record, "rows": rows}, f" ({time.perf_counter() - wall:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

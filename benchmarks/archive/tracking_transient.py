@@ -7,7 +7,7 @@ commanded speed. For each checkpoint and command this rolls out the criterion's 
 ``--head-s`` seconds add and the MSE of the rest (with its mean error: a steady offset).
 Prints a table and writes ``results/tracking_transient.json``.
 
-    python benchmarks/rl/tracking_transient.py runs/time_to_walk/ray-32-0-48-s0/model_819.pt \\
+    python -m benchmarks.archive.tracking_transient runs/time_to_walk/ray-32-0-48-s0/model_819.pt \\
         runs/time_to_walk/ray-32-0-48-s1/model_1059.pt --commands 1 0 0 --commands 0.5 0 0
 """
 
@@ -15,15 +15,15 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, settings, table, write_json
+import chronogym  # noqa: F401  (registers the envs)
+from benchmarks.common import RESULTS, Column, header, settings, table, write_json
 
 OUT = RESULTS / "tracking_transient.json"
 DEFAULT_COMMANDS = ((1.0, 0.0, 0.0), (0.5, 0.0, 0.0))
@@ -68,9 +68,6 @@ def main(argv: list[str] | None = None) -> None:
     for path in args.checkpoints:
         if not path.is_file():
             parser.error(f"checkpoint {str(path)!r}: no such file")
-    import gymnasium as gym
-
-    import chronogym  # noqa: F401  (registers the envs)
     from chronogym.rl.trainer import load_policy
 
     commands = [tuple(c) for c in args.commands] if args.commands else list(DEFAULT_COMMANDS)

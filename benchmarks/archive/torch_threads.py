@@ -5,7 +5,7 @@ iterations with the quadruped's training config and reports, per iteration, the 
 (collection) time, the PPO update (learning) time and env steps/s, median over the iterations
 after the first. ``default`` is torch's own choice (one thread per core it sees).
 
-    python benchmarks/rl/torch_threads.py [--iterations 8] [--num-envs 32]
+    python -m benchmarks.archive.torch_threads [--iterations 8] [--num-envs 32]
 
 Prints a table and writes ``benchmarks/results/torch_threads.json``.
 """
@@ -15,12 +15,10 @@ from __future__ import annotations
 import argparse
 import csv
 import statistics
-import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, header, table, write_json
+from benchmarks.common import RESULTS, Column, header, table, write_json
 
 DEFAULT_OUT = RESULTS / "torch_threads.json"
 COLUMNS = (

@@ -11,8 +11,8 @@ for a policy's forward pass, when a spinning worker gives up and blocks), and th
 workers and the driver use. Prints a table and writes JSON
 (default ``benchmarks/results/socket_spin.json``).
 
-    python benchmarks/vector/socket_spin.py            # default sweep, ~4 min on 2 cores
-    python benchmarks/vector/socket_spin.py --quick    # smoke run, < 1 min
+    python -m benchmarks.archive.socket_spin            # default sweep, ~4 min on 2 cores
+    python -m benchmarks.archive.socket_spin --quick    # smoke run, < 1 min
 
 Columns: ``µs/vstep`` = wall time per vector step (think time included), ``x_spin0`` =
 the speed-up over the smallest spin (``0``: plain blocking reads) for the same row, ``cpu-w`` /
@@ -28,20 +28,19 @@ import os
 import select
 import socket
 import statistics
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import throughput_timing as timing  # this script's folder: the cart-pole timing helpers
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, Column, cpu_percent, header, settings, table, write_json
 from tqdm import tqdm
 
 import chronogym
+from benchmarks.common import RESULTS, Column, cpu_percent, header, settings, table, write_json
+from benchmarks.vector import (
+    throughput_timing as timing,  # this script's folder: the cart-pole timing helpers
+)
 
 DEFAULT_OUT = RESULTS / "socket_spin.json"
 

@@ -5,7 +5,7 @@ and measured in its own subprocess (``PYTHONPATH`` = that ``src``, its own local
 Ray), the revisions alternating round by round so that machine noise falls on
 both. A regression check for refactors of ``vector/``:
 
-    python benchmarks/vector/compare_revisions.py --base 305a016 [--head HEAD] [--rounds 3]
+    python -m benchmarks.archive.compare_revisions --base 305a016 [--head HEAD] [--rounds 3]
 
 Prints a table (median env-steps/s per shape, head / base ratio) and writes JSON.
 """
@@ -20,8 +20,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-from common import RESULTS, header, write_json
+from benchmarks.common import RESULTS, header, write_json
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = RESULTS / "compare_revisions.json"

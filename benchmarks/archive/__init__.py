@@ -1,0 +1,1 @@
+"""Archived one-off probes: each answered one question or set one constant (README.md)."""

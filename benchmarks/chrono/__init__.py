@@ -1,0 +1,1 @@
+"""Chrono against MuJoCo: the same landing in both engines, and sim-to-sim transfer."""

@@ -1,0 +1,1 @@
+"""The lander design study: Optuna trials per second against workers."""

@@ -1,0 +1,1 @@
+"""Training benchmarks: RL scaling and throughput, time to walk, robustness, SB3."""

@@ -1,0 +1,1 @@
+"""SCM soil benchmarks: its cost per step, and a cross-check against Chrono's SCM."""
