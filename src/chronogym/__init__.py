@@ -3,6 +3,10 @@
 Public names are imported lazily so that ``import chronogym`` stays light
 (no Ray, MuJoCo or PyChrono import); importing it registers the
 ``chronogym/...`` Gymnasium ids.
+
+Where to read on: the life of a vector step, hop by hop, is in :mod:`chronogym.vector`'s
+docstring; the stages of a training iteration in :mod:`chronogym.rl`'s; everything about the
+Go1 (task, training, evaluation, play) in :mod:`chronogym.tasks.quadruped`'s.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ _EXPORTS = {
     "make_vec": "chronogym.vector.factory",
     "register_task": "chronogym.registration",
     "make_sim_env": "chronogym.registration",
+    "BoolArgumentError": "chronogym.errors",
     "ChronogymError": "chronogym.errors",
     "TaskDefinitionError": "chronogym.errors",
     "WorkerCrashLoopError": "chronogym.errors",
@@ -43,6 +48,7 @@ if TYPE_CHECKING:
     from chronogym.engines.mujoco import MujocoTask
     from chronogym.env import SimEnv
     from chronogym.errors import (
+        BoolArgumentError,
         ChronogymError,
         DisabledAutoresetError,
         EnvsInFlightError,

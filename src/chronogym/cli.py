@@ -25,6 +25,7 @@ from chronogym.cli_parser import build_parser
 from chronogym.optim import open_storage, run_parallel_study
 from chronogym.optim.lander import LanderObjective, describe_design, suggest_lander_design
 from chronogym.rl.checkpoint import read_checkpoint
+from chronogym.tasks.quadruped.engines import check_engine
 from chronogym.tasks.quadruped.evaluation import format_summary
 from chronogym.tasks.quadruped.play import check_can_render, play_quadruped
 from chronogym.tasks.quadruped.play import play_randomization as quadruped_randomization
@@ -289,6 +290,7 @@ def cmd_play(args: argparse.Namespace) -> int:
         raise UsageError(f"checkpoint {args.checkpoint!r}: no such file")
     if args.video and os.path.splitext(args.video)[1].lower() not in (".mp4", ".gif", ".png"):
         raise UsageError(f"--video={args.video}: expected a .mp4, .gif or .png path")
+    check_engine(args.engine, args.terrain)  # a missing PyChrono before reading the checkpoint
     check_checkpoint(args.checkpoint, "checkpoint")
     if args.video:
         try:
