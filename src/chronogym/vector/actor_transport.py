@@ -17,10 +17,31 @@ from chronogym.vector.backend import Outcome, error_outcome
 from chronogym.vector.group import EnvGroup
 
 
+class ActorGroup(EnvGroup):
+    """An EnvGroup in a Ray actor: its answers leave as plain tuples.
+
+    Ray sends tuples, lists and bytes as msgpack and pickles only the rest; the typed
+    answer would be pickled whole. The driver reads them back with ``StepAnswer.of`` /
+    ``ResetAnswer.of`` (:mod:`chronogym.vector.backend`).
+    """
+
+    def reset(self, *args: Any, **kwargs: Any) -> tuple[Any, ...]:  # type: ignore[override]
+        return super().reset(*args, **kwargs).as_tuple()
+
+    def reset_restarted(self, *args: Any) -> tuple[Any, ...]:  # type: ignore[override]
+        return super().reset_restarted(*args).as_tuple()
+
+    def step(self, *args: Any) -> tuple[Any, ...]:  # type: ignore[override]
+        return super().step(*args).as_tuple()
+
+    def step_packed(self, *args: Any) -> tuple[Any, ...]:  # type: ignore[override]
+        return super().step_packed(*args).as_tuple()
+
+
 class ActorBackend:
     """One Ray actor per worker, each owning an EnvGroup for its whole life."""
 
-    worker_cls: type = EnvGroup  # what each actor holds (an EnvGroup, or optim's TrialWorker)
+    worker_cls: type = ActorGroup  # what each actor holds (an EnvGroup, or optim's TrialWorker)
     builds = "its envs"  # what a worker builds as it starts (for the error when it fails)
 
     def __init__(

@@ -9,6 +9,12 @@ driver (:class:`~chronogym.vector.worker_vector_env.WorkerVectorEnv`) talks to, 
 some handles itself (a socket, the driver's own worker) and leaves the rest to another
 backend joins the two. How a packed step travels as bytes is
 :mod:`chronogym.vector.wire_format`.
+
+A Ray actor call returns an answer as the plain tuple of its fields
+(:class:`~chronogym.vector.actor_transport.ActorGroup`), and the driver reads it back with
+``StepAnswer.of`` / ``ResetAnswer.of``: Ray packs tuples, lists and bytes with msgpack and
+pickles only what is left (arrays, infos), while a dataclass would be pickled whole, which
+cost the actor path 10 % of its throughput (``benchmarks/results/compare_revisions_issue31.json``).
 """
 
 from __future__ import annotations
@@ -63,6 +69,23 @@ class StepAnswer:
     restarts: list[Restart] | None
     timings: tuple[float, float] | None = None
 
+    def as_tuple(self) -> tuple[Any, ...]:
+        """The fields in order: the form in which a Ray actor sends the answer."""
+        return (
+            self.obs,
+            self.rewards,
+            self.terminations,
+            self.truncations,
+            self.infos,
+            self.restarts,
+            self.timings,
+        )
+
+    @classmethod
+    def of(cls, value: StepAnswer | tuple[Any, ...]) -> StepAnswer:
+        """``value`` as a StepAnswer: itself, or one built from :meth:`as_tuple`'s form."""
+        return value if isinstance(value, cls) else cls(*value)
+
 
 @dataclass
 class ResetAnswer:
@@ -71,6 +94,15 @@ class ResetAnswer:
     obs: list[Any]
     infos: list[dict[str, Any]]
     restarts: list[Restart]
+
+    def as_tuple(self) -> tuple[Any, ...]:
+        """The fields in order: the form in which a Ray actor sends the answer."""
+        return (self.obs, self.infos, self.restarts)
+
+    @classmethod
+    def of(cls, value: ResetAnswer | tuple[Any, ...]) -> ResetAnswer:
+        """``value`` as a ResetAnswer: itself, or one built from :meth:`as_tuple`'s form."""
+        return value if isinstance(value, cls) else cls(*value)
 
 
 class Backend(Protocol):

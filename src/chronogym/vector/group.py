@@ -143,7 +143,7 @@ class EnvGroup:
     def reset_restarted(self, seeds: Sequence[int], last_obs: Sequence[Any]) -> ResetAnswer:
         """After the whole process was replaced (SAME_STEP): reset now with ``seeds``."""
         self.pending_seeds = list(seeds)
-        answer = self.reset([None] * len(self.envs), None)
+        answer = self._reset([None] * len(self.envs), None)
         for j, info in enumerate(answer.infos):
             answer.infos[j] = {"final_obs": last_obs[j], "final_info": {}, **info}
         return answer
@@ -171,6 +171,14 @@ class EnvGroup:
         mask: Sequence[bool] | None = None,
     ) -> ResetAnswer:
         """Reset the envs (those where ``mask`` is True); return per-env obs, infos, restarts."""
+        return self._reset(seeds, options, mask)
+
+    def _reset(
+        self,
+        seeds: Sequence[int | None],
+        options: dict[str, Any] | None,
+        mask: Sequence[bool] | None = None,
+    ) -> ResetAnswer:
         infos: list[dict[str, Any]] = [{} for _ in self.envs]
         restarts: list[Restart] = []
         for j in range(len(self.envs)):
@@ -194,6 +202,9 @@ class EnvGroup:
         Returns per-env observations, then rewards, terminations, truncations,
         per-env infos and the restarts.
         """
+        return self._step(actions)
+
+    def _step(self, actions: Sequence[Any]) -> StepAnswer:
         n = len(self.envs)
         if len(actions) != n:
             raise ValueError(f"{len(actions)} actions for the {n} envs of this worker")
@@ -247,7 +258,7 @@ class EnvGroup:
             .copy()
         )
         stepped = time.perf_counter()
-        result = self.step(actions)
+        result = self._step(actions)
         computed = time.perf_counter()
         out = StepAnswer(
             self._batch(result.obs).tobytes(),

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from chronogym.validation import check_number
-from chronogym.vector.actor_transport import ActorBackend
+from chronogym.vector.actor_transport import ActorBackend, ActorGroup
 from chronogym.vector.backend import Outcome, gather_split
 from chronogym.vector.group import EnvGroup
 from chronogym.vector.wire_format import (
@@ -120,8 +120,8 @@ def _poller(sock: socket.socket) -> select.poll:
 
 
 # -- worker side ------------------------------------------------------------------------------
-class SocketWorker(EnvGroup):
-    """An EnvGroup that can also serve its packed steps over a Unix socket."""
+class SocketWorker(ActorGroup):
+    """An actor's EnvGroup that can also serve its packed steps over a Unix socket."""
 
     def open_socket(self, path: str, driver_node: str, spin_us: float) -> bool:
         """On ``driver_node``: serve steps at Unix socket ``path`` (else False), spinning
@@ -179,9 +179,10 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
 
 
 def _step_bytes(group: EnvGroup, action_bytes: memoryview, timed: bool) -> Any:
-    """``group.step_packed`` (which holds the group's lock); an error as a StepFailure."""
+    """``EnvGroup.step_packed`` (which holds the group's lock): the typed answer, not an
+    actor's tuple form; an error as a StepFailure."""
     try:
-        return group.step_packed(action_bytes, timed)
+        return EnvGroup.step_packed(group, action_bytes, timed)
     except Exception as error:
         return StepFailure(error, traceback.format_exc())
 

@@ -258,8 +258,9 @@ class WorkerVectorEnv(VectorEnv):
                 self._seed_roots[i] = s
         return seeds, options, mask
 
-    def _take_reset(self, w: int, answer: ResetAnswer) -> list[dict[str, Any]]:
+    def _take_reset(self, w: int, answer: ResetAnswer | tuple) -> list[dict[str, Any]]:
         """Keep worker ``w``'s reset observations; return its envs' infos."""
+        answer = ResetAnswer.of(answer)
         self._note_restarts(answer.restarts)
         self._last_parts[w] = answer.obs
         return list(answer.infos)
@@ -307,7 +308,8 @@ class WorkerVectorEnv(VectorEnv):
         results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
         out = self._join_results(workers, results)
         marks.append(now())
-        timed = [o.value.timings for o in outcomes if o.ok and o.value.timings is not None]
+        answers = [StepAnswer.of(o.value) for o in outcomes if o.ok]
+        timed = [a.timings for a in answers if a.timings is not None]
         profile.add(marks, timed)
         return out
 
@@ -361,7 +363,7 @@ class WorkerVectorEnv(VectorEnv):
         lo, hi = self._slices[w]
         count = hi - lo
         if outcome.ok:
-            answer: StepAnswer = outcome.value
+            answer = StepAnswer.of(outcome.value)
             part, rew, term, trunc = self._arrays(answer, count)
             infos = answer.infos
             self._note_restarts(answer.restarts or [])
@@ -393,7 +395,7 @@ class WorkerVectorEnv(VectorEnv):
         seeds = self._replace_worker(w, error)
         flags = {"worker_restarted": True, "worker_error": error}
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
-            answer = self._call_one(w, "reset_restarted", seeds, last_rows)
+            answer = ResetAnswer.of(self._call_one(w, "reset_restarted", seeds, last_rows))
             self._note_restarts(answer.restarts)
             return answer.obs, [{**info, **flags} for info in answer.infos]
         self._call_one(w, "mark_restarted", seeds, last_rows)
