@@ -1,16 +1,23 @@
-"""SerialVectorEnv: every env in this process, with RayVectorEnv's exact semantics."""
+"""SerialVectorEnv: every env in this process, with RayVectorEnv's exact semantics.
+
+It takes RayVectorEnv's arguments that mean something in one process
+(``SERIAL_ARGUMENTS``) and rejects, by name, those about Ray and processes
+(``RAY_ONLY_ARGUMENTS``); a test checks that the two cover RayVectorEnv's signature.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import difflib
 import traceback
 from collections.abc import Sequence
 from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
-from chronogym.validation import is_int
+from chronogym.validation import check_int, show
 from chronogym.vector.backend import EnvFactory, Outcome, error_outcome
+from chronogym.vector.checks import normalize_env_fns
 from chronogym.vector.group import EnvGroup
 from chronogym.vector.worker_vector_env import WorkerVectorEnv
 
@@ -55,7 +62,31 @@ class SerialVectorEnv(WorkerVectorEnv):
     """All envs stepped one after another in this process: for debugging and serial baselines.
 
     Same arguments and numbers as :class:`chronogym.RayVectorEnv` (and as
-    ``gymnasium.vector.SyncVectorEnv``), with no Ray involved.
+    ``gymnasium.vector.SyncVectorEnv``), with no Ray involved: switch a
+    ``RayVectorEnv`` to this class to debug it, keeping every argument that
+    means something in one process.
+
+    Args:
+        env_fns: a registered env id, one env factory, or a list of factories
+            (one per env, as for ``SyncVectorEnv``).
+        num_envs: number of envs (required with an id or a single factory).
+        envs_per_worker: envs per group, as ``RayVectorEnv``'s envs per
+            worker: ``send`` steps whole groups, and a group whose call fails
+            is rebuilt whole. Numbers never depend on it. Default (None):
+            every env in one group; ``RayVectorEnv``'s default depends on
+            the cluster's CPUs, so pass the same value to both when
+            ``send`` / ``recv`` code is being debugged.
+        autoreset_mode: Gymnasium's ``AutoresetMode`` (NEXT_STEP default).
+        max_restarts: restarts allowed per env before WorkerCrashLoopError
+            (-1: no limit).
+        invalid_action: ``"raise"`` (default) or ``"clip"`` for NaN/Inf actions.
+        env_kwargs: keyword arguments for ``gymnasium.make`` when ``env_fns``
+            is an id.
+        **ray_only: ``RayVectorEnv``'s arguments about Ray and processes
+            (``num_cpus``, ``num_gpus``, ``address``, ``worker_niceness``,
+            ``scheduling``, ``step_timeout``, ``start_timeout``, ``transport``,
+            ``spin_us``, ``driver_worker``) have no meaning here: each raises a
+            TypeError that names it, as does any other unknown name.
     """
 
     def __init__(
@@ -63,17 +94,24 @@ class SerialVectorEnv(WorkerVectorEnv):
         env_fns: str | EnvFactory | Sequence[str | EnvFactory],
         num_envs: int | None = None,
         *,
+        envs_per_worker: int | None = None,
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
         max_restarts: int = 3,
         invalid_action: str = "raise",
         env_kwargs: dict[str, Any] | None = None,
+        **ray_only: Any,
     ) -> None:
-        count = num_envs if num_envs is not None else _count(env_fns)
+        check_no_ray_arguments(ray_only)
+        count = len(normalize_env_fns(env_fns, num_envs))
+        if envs_per_worker is None:
+            envs_per_worker = count
+        expected = f"an integer with 1 <= envs_per_worker <= num_envs={count}"
+        check_int("envs_per_worker", envs_per_worker, low=1, high=count, expected=expected)
         super().__init__(
             env_fns,
             num_envs,
             backend=LocalBackend(),
-            envs_per_worker=count if is_int(count) and count >= 1 else 1,
+            envs_per_worker=envs_per_worker,
             autoreset_mode=autoreset_mode,
             max_restarts=max_restarts,
             invalid_action=invalid_action,
@@ -81,7 +119,48 @@ class SerialVectorEnv(WorkerVectorEnv):
         )
 
 
-def _count(env_fns: Any) -> int | None:
-    if isinstance(env_fns, Sequence) and not isinstance(env_fns, str):
-        return len(env_fns)
-    return None
+#: RayVectorEnv's arguments that SerialVectorEnv rejects, and what each sets in Ray.
+RAY_ONLY_ARGUMENTS: dict[str, str] = {
+    "num_cpus": "the CPUs reserved for each Ray worker",
+    "num_gpus": "the GPUs reserved for each Ray worker",
+    "address": "the Ray cluster to join",
+    "worker_niceness": "the priority of the Ray worker processes",
+    "scheduling": "where Ray places its workers",
+    "step_timeout": "how long a worker process may take before it is replaced; a call in "
+    "this process cannot be timed out",
+    "start_timeout": "how long the Ray workers may take to start",
+    "transport": "how the driver reaches the worker processes",
+    "spin_us": "how long the driver's socket spins waiting for a worker process",
+    "driver_worker": "whether the driver steps the last worker's envs itself; here it steps "
+    "them all",
+}
+
+#: SerialVectorEnv's own keyword arguments.
+SERIAL_ARGUMENTS = (
+    "envs_per_worker",
+    "autoreset_mode",
+    "max_restarts",
+    "invalid_action",
+    "env_kwargs",
+)
+
+
+def ray_only_message(name: str, value: Any) -> str:
+    """Why ``name=value`` (a RayVectorEnv argument) has no meaning in one process."""
+    return (
+        f"{name}={show(value)}: has no meaning for SerialVectorEnv (one process; it sets "
+        f"{RAY_ONLY_ARGUMENTS[name]}); it is a RayVectorEnv argument: leave it out"
+    )
+
+
+def check_no_ray_arguments(kwargs: dict[str, Any]) -> None:
+    """Raise a TypeError naming the first keyword argument SerialVectorEnv does not take."""
+    for name, value in kwargs.items():
+        if name in RAY_ONLY_ARGUMENTS:
+            raise TypeError(ray_only_message(name, value))
+        close = difflib.get_close_matches(name, SERIAL_ARGUMENTS, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise TypeError(
+            f"SerialVectorEnv() got an unexpected keyword argument {name!r}; {hint}expected "
+            f"one of {', '.join(SERIAL_ARGUMENTS)}"
+        )
