@@ -152,3 +152,117 @@ def test_divergence_check_reads_the_right_mujoco_warning_counters():
         int(warning.mjWARN_BADQVEL),
         int(warning.mjWARN_BADQACC),
     ) == (engine._BADQPOS, engine._BADQVEL, engine._BADQACC)
+
+
+# -- what observe() returns is checked against observation_space ----------------------------
+class ObservesWrong(CartPoleTask):
+    """CartPole whose observe() returns ``wrong(obs)`` from call ``from_call`` on (1: reset)."""
+
+    def __init__(self, wrong, space=None, from_call: int = 1) -> None:
+        super().__init__(reset_noise=0.0)
+        self.wrong, self.space, self.from_call, self.calls = wrong, space, from_call, 0
+
+    def setup(self) -> None:
+        super().setup()
+        if self.space is not None:
+            self.observation_space = self.space
+
+    def observe(self):
+        self.calls += 1
+        obs = super().observe()
+        return self.wrong(obs) if self.calls >= self.from_call else obs
+
+    def terminated(self, obs) -> bool:
+        return False
+
+
+FLOAT32_4 = gym.spaces.Box(-np.inf, np.inf, (4,), np.float32)
+NESTED = gym.spaces.Dict(
+    pos=gym.spaces.Box(-1, 1, (2,)), mode=gym.spaces.Tuple((gym.spaces.Discrete(3),))
+)
+
+
+@pytest.mark.parametrize(
+    ("wrong", "space", "message"),
+    [
+        (
+            lambda obs: obs[:3],
+            FLOAT32_4,
+            r"ObservesWrong.observe\(\) returned shape \(3,\) float64 in reset\(\); the "
+            r"observation space is Box\(-inf, inf, \(4,\), float32\): expected shape \(4,\) "
+            r"and float32",
+        ),
+        (
+            lambda obs: obs.astype(np.complex64),
+            FLOAT32_4,
+            r"returned shape \(4,\) complex64 in reset\(\); the observation space is Box",
+        ),
+        (lambda obs: list(obs[:2]), None, r"returned a list of shape \(2,\) float64 in reset"),
+        (
+            lambda obs: {"pos": obs[:2], "mode": (0.5,)},
+            NESTED,
+            r"returned obs\['mode'\]\[0\]: a float of shape \(\) float64 in reset\(\); "
+            r"obs\['mode'\]\[0\] in the observation space is Discrete\(3\)",
+        ),
+        (
+            lambda obs: {"pos": obs[:2]},
+            NESTED,
+            r"returned a dict with keys \['pos'\] in reset\(\); the observation space is "
+            r"Dict\(.*\): expected a dict with keys \['mode', 'pos'\]",
+        ),
+        (
+            lambda obs: "far too long",
+            gym.spaces.Text(5),
+            r"returned a str 'far too long' in reset\(\); the observation space is Text\(1, 5",
+        ),
+    ],
+)
+def test_reset_raises_when_the_observation_does_not_fit_the_space(wrong, space, message):
+    env = SimEnv(ObservesWrong(wrong, space))
+    with pytest.raises(chronogym.TaskDefinitionError, match=message):
+        env.reset(seed=0)
+
+
+def test_first_step_raises_on_a_wrong_shape_then_steps_are_not_checked():
+    env = SimEnv(ObservesWrong(lambda obs: obs[:3], from_call=2))
+    env.reset(seed=0)
+    message = r"ObservesWrong.observe\(\) returned shape \(3,\) float64 in step\(\)"
+    with pytest.raises(chronogym.TaskDefinitionError, match=message):
+        env.step(np.zeros(1, dtype=np.float32))
+    late = SimEnv(ObservesWrong(lambda obs: obs[:3], from_call=3))
+    late.reset(seed=0)
+    late.step(np.zeros(1, dtype=np.float32))  # checked, fine
+    assert late.step(np.zeros(1, dtype=np.float32))[0].shape == (3,)  # no per-step check
+    with pytest.raises(chronogym.TaskDefinitionError, match=r"shape \(3,\) float64 in reset"):
+        late.reset()  # every reset is checked
+
+
+def test_a_dtype_that_casts_to_the_space_passes_unchanged():
+    """float64 for a float32 Box: returned as is (vector envs cast it, as Gymnasium's do)."""
+    env = SimEnv(ObservesWrong(lambda obs: obs, FLOAT32_4))
+    obs, _ = env.reset(seed=0)
+    assert obs.dtype == np.float64
+    assert env.step(np.zeros(1, dtype=np.float32))[0].dtype == np.float64
+
+
+def test_function_task_observation_is_named_by_its_function():
+    def observe_pair(resources):
+        return np.zeros(2)
+
+    task = chronogym.FunctionTask(
+        init=lambda: ([lambda dt: None], None),
+        reset=lambda resources, rng, options: None,
+        apply_action=lambda resources, action: None,
+        observe=observe_pair,
+        reward=lambda resources, action, obs: 0.0,
+        terminated=lambda resources, obs: False,
+        dt=0.01,
+        observation_space=gym.spaces.Box(-1, 1, (3,)),
+        action_space=gym.spaces.Box(-1, 1, (1,)),
+    )
+    message = (
+        r"FunctionTask's observe=test_function_task_observation_is_named_by_its_function"
+        r".<locals>.observe_pair returned shape \(2,\) float64 in reset\(\)"
+    )
+    with pytest.raises(chronogym.TaskDefinitionError, match=message):
+        SimEnv(task).reset(seed=0)

@@ -10,8 +10,17 @@ import numpy as np
 
 from chronogym.actions import check_invalid_action_mode, prepare_action
 from chronogym.advance import Advancer
-from chronogym.task import Task, check_task_definition, check_task_spaces
-from chronogym.validation import check_int
+from chronogym.errors import TaskDefinitionError
+from chronogym.task import FunctionTask, Task, check_task_definition, check_task_spaces
+from chronogym.validation import check_int, show
+
+#: Spaces whose elements are arrays of one shape and dtype (checked by shape and dtype).
+_ARRAY_SPACES = (
+    gym.spaces.Box,
+    gym.spaces.Discrete,
+    gym.spaces.MultiDiscrete,
+    gym.spaces.MultiBinary,
+)
 
 
 def _all_finite(value: Any) -> bool:
@@ -34,6 +43,79 @@ def _zero_non_finite(value: Any) -> Any:
     if isinstance(value, tuple):
         return tuple(_zero_non_finite(v) for v in value)
     return value
+
+
+def _observation_problem(obs: Any, space: gym.Space, path: str = "") -> tuple[str, str] | None:
+    """What came back and what was expected when ``obs`` does not fit ``space`` (its shape,
+    dtype or structure); None when it fits.
+
+    Array spaces: the shape must match and the dtype must cast to the space's by NumPy's
+    ``same_kind`` rule (float64 for a float32 Box passes, as Gymnasium's vector envs cast
+    it; float for an integer space does not). Tuple and Dict: part by part. Other spaces:
+    ``space.contains(obs)``. ``path`` names the part, e.g. ``obs['arm']``.
+    """
+    got = f"{path}: " if path else ""
+    where = f"{path} in the observation space" if path else "the observation space"
+    if isinstance(space, _ARRAY_SPACES):
+        try:
+            array = np.asarray(obs)
+        except (ValueError, TypeError):  # ragged lists, objects NumPy cannot read
+            array = None
+        if array is not None and array.dtype != object:
+            if array.shape == space.shape and np.can_cast(array.dtype, space.dtype, "same_kind"):
+                return None
+            kind = (
+                "" if isinstance(obs, (np.ndarray, np.generic)) else f"a {type(obs).__name__} of "
+            )
+            got += f"{kind}shape {array.shape} {array.dtype}"
+        else:
+            got += f"a {type(obs).__name__} {show(obs)}"
+        return got, (
+            f"{where} is {space}: "
+            f"expected shape {space.shape} and {space.dtype} (or a dtype NumPy casts to it)"
+        )
+    if isinstance(space, gym.spaces.Tuple):
+        if not isinstance(obs, tuple) or len(obs) != len(space.spaces):
+            size = f" of length {len(obs)}" if isinstance(obs, (tuple, list)) else ""
+            return (
+                f"{got}a {type(obs).__name__}{size}",
+                f"{where} is {space}: expected a tuple of {len(space.spaces)}",
+            )
+        parts = enumerate(zip(obs, space.spaces, strict=True))
+        found = (_observation_problem(o, s, f"{path or 'obs'}[{i}]") for i, (o, s) in parts)
+        return next((problem for problem in found if problem), None)
+    if isinstance(space, gym.spaces.Dict):
+        if not isinstance(obs, dict) or set(obs) != set(space.spaces):
+            keys = f" with keys {sorted(obs, key=str)}" if isinstance(obs, dict) else ""
+            return (
+                f"{got}a {type(obs).__name__}{keys}",
+                f"{where} is {space}: expected a dict with keys {sorted(space.spaces, key=str)}",
+            )
+        items = space.spaces.items()
+        found = (_observation_problem(obs[k], s, f"{path or 'obs'}[{k!r}]") for k, s in items)
+        return next((problem for problem in found if problem), None)
+    try:
+        if space.contains(obs):
+            return None
+    except NotImplementedError:  # a custom space without contains(): nothing to check
+        return None
+    return f"{got}a {type(obs).__name__} {show(obs)}", f"{where} is {space}: not an element of it"
+
+
+def check_observation(task: Task, obs: Any, space: gym.Space, where: str) -> None:
+    """Raise TaskDefinitionError when ``obs``, what ``task.observe()`` returned in ``where``
+    (``"reset()"``, ``"step()"``), does not fit ``space``; the message names the task, the
+    space and what came back."""
+    problem = _observation_problem(obs, space)
+    if problem is None:
+        return
+    if isinstance(task, FunctionTask):
+        fn = task._fns["observe"]
+        who = f"FunctionTask's observe={getattr(fn, '__qualname__', fn)}"
+    else:
+        who = f"{type(task).__name__}.observe()"
+    got, expected = problem
+    raise TaskDefinitionError(f"{who} returned {got} in {where}; {expected}")
 
 
 def _usable_render_modes(task: Task, render_mode: Any) -> list[str]:
@@ -76,6 +158,9 @@ class SimEnv(gym.Env):
     ``metadata["render_modes"]`` lists ``"rgb_array"`` only when the task
     renders and this process can (e.g. MuJoCo found an OpenGL backend);
     another ``render_mode`` than None or those is refused before ``task.init()``.
+    The observation of every ``reset`` and of the first ``step`` is checked against
+    ``observation_space`` (shape, and a dtype that casts to the space's): a mismatch raises
+    TaskDefinitionError naming the task, the space and what came back.
     """
 
     def __init__(
@@ -110,6 +195,7 @@ class SimEnv(gym.Env):
         self.render_mode = render_mode
         self.sim_time = 0.0
         self.elapsed_steps = 0
+        self._check_step_obs = True  # the first step's observation is checked, then none
 
     @property
     def control_dt(self) -> float:
@@ -124,6 +210,7 @@ class SimEnv(gym.Env):
         self.elapsed_steps = 0
         self.task.reset(self.np_random, options)
         obs = self.task.observe()
+        check_observation(self.task, obs, self.observation_space, "reset()")
         info = dict(self.task.info())
         if not _all_finite(obs) or self.task.diverged():
             raise FloatingPointError(
@@ -139,6 +226,9 @@ class SimEnv(gym.Env):
         self.sim_time += self.k * self.dt
         self.elapsed_steps += 1
         obs = task.observe()
+        if self._check_step_obs:
+            check_observation(task, obs, self.observation_space, "step()")
+            self._check_step_obs = False
         reward = float(task.reward(action, obs))
         terminated = bool(task.terminated(obs))
         truncated = bool(task.truncated(obs))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from typing import Any
 
 import numpy as np
@@ -116,13 +117,41 @@ class SceneRenderer:
             self._renderer = None
 
 
+_WARNED_DT: set[type] = set()
+
+
+def _warn_class_dt(task: MujocoTask, timestep: float) -> None:
+    """Warn once per class when a ``dt`` set on the class (not by the constructor) differs
+    from the timestep of the model that ``load_model()`` returned."""
+    cls = type(task)
+    dt = task.dt
+    if (
+        "dt" in vars(task)  # the instance's own dt: a constructor argument, chosen on purpose
+        or cls in _WARNED_DT
+        or dt is None
+        or abs(timestep - dt) <= 1e-12 * max(1.0, dt)
+    ):
+        return
+    _WARNED_DT.add(cls)
+    warnings.warn(
+        f"{cls.__name__}.dt = {dt!r} differs from its MuJoCo model's timestep {timestep!r} "
+        f"(<option timestep> in the MJCF, 0.002 when it sets none); dt wins: the model steps "
+        f"at {dt!r} s. Make the two equal to silence this warning (given once per class)",
+        UserWarning,
+        stacklevel=3,
+    )
+
+
 class MujocoTask(Task):
     """A Task over one MuJoCo model/data pair.
 
     Subclasses implement ``load_model()`` (and usually ``setup()`` to define
     spaces and look up ids), ``reset``, ``apply_action``, ``observe``,
-    ``reward`` and ``terminated``. When the subclass sets ``dt``, it becomes
-    ``model.opt.timestep``; otherwise ``dt`` is taken from the model.
+    ``reward`` and ``terminated``. ``dt`` wins over the MJCF timestep: ``init()`` sets
+    ``model.opt.timestep = dt`` (and takes ``dt`` from the model only when it is None). A
+    ``dt`` set on the class that differs from the model's timestep warns once per class; a
+    ``dt`` the constructor sets (``CartPoleTask(dt=0.001)``) is an explicit choice and does
+    not (docs/guides/advance.md, "MuJoCo's timestep and dt").
     Divergence detection and offscreen ``rgb_array`` rendering come for free
     (rendering needs an OpenGL backend: ``MUJOCO_GL=egl`` or ``osmesa``; without
     one, ``SimEnv`` lists no render mode). Set ``render_modes = ()`` to opt out.
@@ -151,6 +180,7 @@ class MujocoTask(Task):
         if self.dt is None:
             self.dt = float(self.model.opt.timestep)
         else:
+            _warn_class_dt(self, float(self.model.opt.timestep))
             self.model.opt.timestep = self.dt
         self.data = mujoco.MjData(self.model)
         self.advanceables = [(self.model, self.data)]

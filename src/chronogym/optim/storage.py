@@ -16,6 +16,8 @@ def open_storage(url: str) -> Any:
       processes (e.g. drivers on a shared filesystem);
     * any other SQLAlchemy URL (``postgresql://…``, ``mysql://…``) — an RDB server for
       cluster use.
+
+    The file's folder must exist: no folder is created (FileNotFoundError names it).
     """
     import optuna
 
@@ -25,13 +27,50 @@ def open_storage(url: str) -> Any:
         path = Path(url[len("journal:") :].removeprefix("//"))
         if not path.name:
             raise ValueError(f"storage={url!r}: expected 'journal:path/to/file.log'")
-        path.parent.mkdir(parents=True, exist_ok=True)
+        _check_folder(url, path)
         backend = optuna.storages.journal.JournalFileBackend(str(path))
         return optuna.storages.JournalStorage(backend)
     if "://" not in url:
         raise ValueError(
             f"storage={url!r}: expected 'sqlite:///file.db', 'journal:file.log' or an RDB URL"
         )
-    if url.startswith("sqlite:///"):
-        Path(url[len("sqlite:///") :]).parent.mkdir(parents=True, exist_ok=True)
+    database = _sqlite_file(url)
+    if database is not None:
+        _check_folder(url, database)
     return optuna.storages.RDBStorage(url)
+
+
+def _sqlite_file(url: str) -> Path | None:
+    """The database file of a SQLite URL; None for another database, an in-memory one or a
+    ``file:`` URI (SQLite reads those itself)."""
+    if not url.startswith("sqlite"):
+        return None
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    try:
+        parsed = make_url(url)
+    except ArgumentError:  # RDBStorage reports it
+        return None
+    database = parsed.database
+    if parsed.get_backend_name() != "sqlite" or not database or database == ":memory:":
+        return None
+    if database.startswith("file:"):
+        return None
+    return Path(database)
+
+
+def _check_folder(url: str, path: Path) -> None:
+    """Raise FileNotFoundError when the folder that would hold ``path`` does not exist."""
+    folder = path.parent
+    if folder.is_dir():
+        return
+    if folder.exists():
+        raise FileNotFoundError(
+            f"storage={url!r}: {str(folder)!r} is not a folder; "
+            "expected a file in an existing folder"
+        )
+    raise FileNotFoundError(
+        f"storage={url!r}: the folder {str(folder)!r} does not exist; create it first "
+        "(chronogym creates no folders)"
+    )
