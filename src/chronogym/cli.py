@@ -409,7 +409,8 @@ def cmd_envs(args: argparse.Namespace) -> int:
         print(spec.id)
         print(f"  observation space: {env.observation_space}")
         print(f"  action space     : {env.action_space}")
-        print(f"  episode steps    : {spec.max_episode_steps or 'set by the task'}")
+        steps = env.spec.max_episode_steps if env.spec is not None else None
+        print(f"  episode steps    : {steps if steps is not None else 'no limit'}")
     finally:
         env.close()
     return 0

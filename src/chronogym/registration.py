@@ -1,17 +1,30 @@
-"""Gymnasium ids for chronogym tasks: ``gymnasium.make("chronogym/CartPole-v0")``."""
+"""Gymnasium ids for chronogym tasks: ``gymnasium.make("chronogym/CartPole-v0")``.
+
+Each id has an entry point (:func:`make_task_env`: the SimEnv, its ``spec`` showing the
+task's horizon) and a vector entry point (:func:`make_task_vector_env`: a RayVectorEnv, or
+another backend, for ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``).
+"""
 
 from __future__ import annotations
 
+import copy
+import functools
 import importlib
+import warnings
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 
 if TYPE_CHECKING:
+    from gymnasium.envs.registration import EnvSpec
+
     from chronogym.env import SimEnv
     from chronogym.task import Task
 
 NAMESPACE = "chronogym"
+ENTRY_POINT = "chronogym.registration:make_task_env"
+VECTOR_ENTRY_POINT = "chronogym.registration:make_task_vector_env"
 
 TASKS: dict[str, str] = {
     "CartPole-v0": "chronogym.tasks.cartpole.mujoco:CartPoleTask",
@@ -53,15 +66,113 @@ def make_sim_env(
     )
 
 
+class TaskHorizon(gym.Wrapper):
+    """Shows the SimEnv's horizon as ``env.spec.max_episode_steps``; changes nothing else.
+
+    ``gymnasium.make`` adds a ``TimeLimit`` only for a ``max_episode_steps`` it is given:
+    the horizon stays the SimEnv's own (it may depend on the task's arguments), so
+    episodes end exactly where the task ends them, and only the spec reports it.
+    """
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        spec = self.env.spec
+        steps = getattr(self.env.unwrapped, "max_episode_steps", None)
+        if spec is None or spec.max_episode_steps is not None or steps is None:
+            return spec
+        spec = copy.deepcopy(spec)
+        spec.max_episode_steps = steps
+        return spec
+
+
+def make_task_env(task: str | type[Task], **kwargs: Any) -> gym.Env:
+    """The entry point of every id :func:`register_task` registers: :func:`make_sim_env`
+    in :class:`TaskHorizon`, so that ``env.spec.max_episode_steps`` is the task's horizon."""
+    return TaskHorizon(make_sim_env(task, **kwargs))
+
+
+def make_task_vector_env(
+    num_envs: int,
+    *,
+    backend: str = "ray",
+    vector_options: Mapping[str, Any] | None = None,
+    **env_kwargs: Any,
+) -> gym.vector.VectorEnv:
+    """The vector entry point of every registered task: ``num_envs`` envs on ``backend``.
+
+    ``gymnasium.make_vec(id, n, vectorization_mode="vector_entry_point", **kwargs)`` calls
+    it with the id's registered keyword arguments updated by ``kwargs``. ``backend`` is one
+    of ``chronogym.make_vec``'s (``"ray"``: RayVectorEnv, the default; ``"serial"``,
+    ``"sync"``, ``"async"``); ``vector_options`` go to that vector env's constructor
+    (``envs_per_worker``, ``num_cpus``, ``autoreset_mode``...); every other keyword
+    argument goes to :func:`make_sim_env` (the task's arguments, ``render_mode``...).
+    """
+    from chronogym.vector.factory import BACKENDS
+
+    if backend not in BACKENDS:
+        raise ValueError(f"backend={backend!r}: expected one of {BACKENDS}")
+    if vector_options is None:
+        vector_options = {}
+    if not isinstance(vector_options, Mapping):
+        raise TypeError(
+            f"vector_options={vector_options!r}: expected a dict of the {backend!r} vector "
+            "env's keyword arguments (Gymnasium refuses vector_kwargs in this mode)"
+        )
+    factory = functools.partial(make_sim_env, **env_kwargs)
+    if backend == "ray":
+        from chronogym.vector.ray_vector_env import RayVectorEnv
+
+        return RayVectorEnv(factory, num_envs, **vector_options)
+    if backend == "serial":
+        from chronogym.vector.serial import SerialVectorEnv
+
+        return SerialVectorEnv(factory, num_envs, **vector_options)
+    vector_cls = gym.vector.SyncVectorEnv if backend == "sync" else gym.vector.AsyncVectorEnv
+    return vector_cls([factory] * num_envs, **vector_options)
+
+
+def _same_registration(spec: EnvSpec, kwargs: dict[str, Any]) -> bool:
+    """True when ``spec`` is this module's registration with these keyword arguments."""
+    if spec.entry_point != ENTRY_POINT or spec.vector_entry_point != VECTOR_ENTRY_POINT:
+        return False
+    try:
+        return bool(spec.kwargs == kwargs)
+    except Exception:  # e.g. numpy arrays among the defaults: not provably the same
+        return False
+
+
 def register_task(env_id: str, task: str | type[Task], **default_kwargs: Any) -> None:
-    """Register a Task under a Gymnasium id; keyword arguments of ``make`` reach the Task."""
-    if env_id in gym.registry:
-        return
+    """Register a Task under a Gymnasium id; keyword arguments of ``make`` reach the Task.
+
+    Registering the same task and arguments again does nothing. Another task (a class
+    defined again in a notebook counts as another) or other arguments replace the old
+    registration, with a warning that names both.
+    """
+    kwargs = {"task": task, **default_kwargs}
+    old = gym.registry.get(env_id)
+    if old is not None:
+        if _same_registration(old, kwargs):
+            return
+        old_task = old.kwargs.get("task", old.entry_point)
+        warnings.warn(
+            f"register_task({env_id!r}): replacing the registered {_name(old_task)} "
+            f"(kwargs {old.kwargs}) with {_name(task)} (kwargs {kwargs})",
+            UserWarning,
+            stacklevel=2,
+        )
+        del gym.registry[env_id]  # Gymnasium would warn once more
     gym.register(
         id=env_id,
-        entry_point="chronogym.registration:make_sim_env",
-        kwargs={"task": task, **default_kwargs},
+        entry_point=ENTRY_POINT,
+        vector_entry_point=VECTOR_ENTRY_POINT,
+        kwargs=kwargs,
     )
+
+
+def _name(task: Any) -> str:
+    if isinstance(task, type):
+        return f"{task.__module__}.{task.__qualname__}"
+    return repr(task)
 
 
 def register_envs() -> None:
