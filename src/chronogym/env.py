@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 
 from chronogym.actions import check_invalid_action_mode, prepare_action
 from chronogym.advance import Advancer
@@ -162,6 +164,22 @@ class SimEnv(gym.Env):
     ``observation_space`` (shape, and a dtype that casts to the space's): a mismatch raises
     TaskDefinitionError naming the task, the space and what came back.
     """
+
+    _spec: EnvSpec | None = None
+
+    @property
+    def spec(self) -> EnvSpec | None:  # type: ignore[override]
+        """The spec ``gymnasium.make`` gave this env, whose ``max_episode_steps`` is the
+        task's horizon where the registry sets none. The horizon stays the env's own:
+        ``gymnasium.make`` adds a ``TimeLimit`` only for a ``max_episode_steps`` it is given."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        if value is not None and value.max_episode_steps is None:
+            value = dataclasses.replace(value, max_episode_steps=self.max_episode_steps)
+        self._spec = value
+
 
     def __init__(
         self,

@@ -1,13 +1,12 @@
 """Gymnasium ids for chronogym tasks: ``gymnasium.make("chronogym/CartPole-v0")``.
 
-Each id has an entry point (:func:`make_task_env`: the SimEnv, its ``spec`` showing the
+Each id has an entry point (:func:`make_sim_env`: the SimEnv, whose ``spec`` shows the
 task's horizon) and a vector entry point (:func:`make_task_vector_env`: a RayVectorEnv, or
 another backend, for ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``).
 """
 
 from __future__ import annotations
 
-import copy
 import functools
 import importlib
 import warnings
@@ -23,7 +22,7 @@ if TYPE_CHECKING:
     from chronogym.task import Task
 
 NAMESPACE = "chronogym"
-ENTRY_POINT = "chronogym.registration:make_task_env"
+ENTRY_POINT = "chronogym.registration:make_sim_env"
 VECTOR_ENTRY_POINT = "chronogym.registration:make_task_vector_env"
 
 TASKS: dict[str, str] = {
@@ -64,31 +63,6 @@ def make_sim_env(
         max_episode_steps=max_episode_steps,
         invalid_action=invalid_action,
     )
-
-
-class TaskHorizon(gym.Wrapper):
-    """Shows the SimEnv's horizon as ``env.spec.max_episode_steps``; changes nothing else.
-
-    ``gymnasium.make`` adds a ``TimeLimit`` only for a ``max_episode_steps`` it is given:
-    the horizon stays the SimEnv's own (it may depend on the task's arguments), so
-    episodes end exactly where the task ends them, and only the spec reports it.
-    """
-
-    @property
-    def spec(self) -> EnvSpec | None:
-        spec = self.env.spec
-        steps = getattr(self.env.unwrapped, "max_episode_steps", None)
-        if spec is None or spec.max_episode_steps is not None or steps is None:
-            return spec
-        spec = copy.deepcopy(spec)
-        spec.max_episode_steps = steps
-        return spec
-
-
-def make_task_env(task: str | type[Task], **kwargs: Any) -> gym.Env:
-    """The entry point of every id :func:`register_task` registers: :func:`make_sim_env`
-    in :class:`TaskHorizon`, so that ``env.spec.max_episode_steps`` is the task's horizon."""
-    return TaskHorizon(make_sim_env(task, **kwargs))
 
 
 def make_task_vector_env(
