@@ -10,9 +10,13 @@ import subprocess
 import sys
 import textwrap
 
+import cloudpickle
+import gymnasium as gym
 import pytest
 
 pytest.importorskip("stable_baselines3")
+
+from chronogym.integrations._indexed import DriverRegistry, build_indexed_env
 
 SCRIPT = textwrap.dedent(
     """
@@ -102,3 +106,41 @@ def test_script_registered_id_works_through_both_sb3_routes(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     for route in ("make_vec_env", "make_sb3_vec_env"):
         assert f"{route} same numbers as DummyVecEnv (9, 4, 4)" in done.stdout, done.stdout
+
+
+@pytest.fixture
+def forget_ids():
+    """Ids a test registers, removed from this process's registry afterwards."""
+    ids: list[str] = []
+    yield ids
+    for env_id in ids:
+        gym.registry.pop(env_id, None)
+
+
+def test_a_worker_registers_the_drivers_missing_ids_and_builds_again(forget_ids) -> None:
+    """In one process: an id the 'worker' lacks is registered from the driver's snapshot."""
+    env_id = "newuser/CartPoleCopy-v0"
+    forget_ids.append(env_id)
+    gym.register(
+        env_id,
+        entry_point=gym.spec("chronogym/CartPole-v0").entry_point,
+        kwargs=gym.spec("chronogym/CartPole-v0").kwargs,
+    )
+    registry = DriverRegistry(cloudpickle.dumps)
+    del gym.registry[env_id]  # as in a worker, which never ran the user's script
+    env = build_indexed_env(lambda: gym.make(env_id), 3, registry)
+    assert env.chronogym_env_index == 3 and env.spec.id == env_id
+    env.close()
+    with pytest.raises(gym.error.NameNotFound):  # not in the driver either: Gymnasium's error
+        build_indexed_env(lambda: gym.make("newuser/NoSuch-v0"), 0, registry)
+
+
+def test_a_spec_the_worker_cannot_load_is_named_in_the_error(forget_ids) -> None:
+    registry = DriverRegistry(cloudpickle.dumps)
+    registry.specs["elsewhere/Env-v0"] = b"not a pickle"
+    forget_ids.append("elsewhere/Env-v0")
+    with pytest.raises(
+        gym.error.NamespaceNotFound,
+        match=r"'elsewhere/Env-v0'\] could not be loaded here: UnpicklingError",
+    ):
+        build_indexed_env(lambda: gym.make("elsewhere/Env-v0"), 0, registry)

@@ -89,20 +89,22 @@ class DriverRegistry:
             except Exception:  # an unpicklable spec: the workers go without that id
                 continue
 
-    def register_missing(self) -> list[str]:
-        """Register the specs this process lacks; the ids registered."""
-        added = []
+    def register_missing(self) -> tuple[list[str], dict[str, str]]:
+        """Register the specs this process lacks: the ids registered, and the ids whose
+        spec could not be loaded here (its code does not import), with the error."""
+        added, failed = [], {}
         for env_id, data in self.specs.items():
             if env_id in gym.registry:
                 continue
             try:
                 spec = pickle.loads(data)
-            except Exception:  # its code does not import here: leave that id out
+            except Exception as error:  # its code does not import here: leave that id out
+                failed[env_id] = f"{type(error).__name__}: {error}"
                 continue
             if isinstance(spec, EnvSpec):
                 gym.registry[env_id] = spec
                 added.append(env_id)
-        return added
+        return added, failed
 
 
 def make_indexed_env(
@@ -126,10 +128,24 @@ def build_indexed_env(
     """
     try:
         env = env_fn()
-    except gym.error.UnregisteredEnv:
-        if registry is None or not registry.register_missing():
+    except gym.error.UnregisteredEnv as error:
+        if registry is None:
             raise
-        env = env_fn()
+        added, failed = registry.register_missing()
+        if failed:
+            error = type(error)(
+                f"{error} (in worker pid {os.getpid()}: the driver's specs of {sorted(failed)} "
+                f"could not be loaded here: {'; '.join(failed.values())}; make the env's "
+                "module importable on every worker, or define the env in the script)"
+            )
+        if not added:
+            raise error
+        try:
+            env = env_fn()
+        except gym.error.UnregisteredEnv:
+            if not failed:
+                raise
+            raise error from None
     if not isinstance(env, gym.Env):
         raise TypeError(
             f"env_fns[{index}]={env_fn!r} returned {env!r} (a {type(env).__name__}); "
