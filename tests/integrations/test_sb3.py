@@ -355,6 +355,13 @@ def test_bad_input_names_the_value() -> None:
         make_sb3_vec_env(CARTPOLE, 2, "gpu")
     with pytest.raises(ValueError, match="num_envs=0"):
         make_sb3_vec_env(CARTPOLE, 0, "serial")
+    with pytest.raises(TypeError, match="env_id=<function.*expected a registered Gymnasium id"):
+        make_sb3_vec_env(lambda: gym.make(CARTPOLE), 2, "serial")
+    with pytest.raises(gym.error.NameNotFound, match="NoSuch"):
+        make_sb3_vec_env("chronogym/NoSuch-v0", 2, "ray")  # in the driver, before any worker
+    from_spec = make_sb3_vec_env(gym.spec(CARTPOLE), 2, "serial")
+    assert from_spec.get_attr("spec")[0].id == CARTPOLE
+    from_spec.close()
     venv = make_sb3_vec_env(CARTPOLE, 3, "serial")
     try:
         for bad, error in (

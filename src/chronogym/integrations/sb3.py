@@ -26,6 +26,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.vector import AutoresetMode
 
 try:
@@ -479,7 +480,7 @@ def _ray_dumps() -> Callable[[Any], bytes]:
 
 
 def make_sb3_vec_env(
-    env_id: str,
+    env_id: str | EnvSpec,
     num_envs: int,
     backend: str = "ray",
     *,
@@ -506,7 +507,7 @@ def make_sb3_vec_env(
             f"autoreset_mode={mode!r}: make_sb3_vec_env needs AutoresetMode.SAME_STEP "
             "(SB3 resets an env in the step that ends it); leave autoreset_mode out"
         )
-    spec = gym.spec(env_id)  # an unknown id fails here; workers get the spec, not the id
+    spec = _env_spec(env_id)  # an unknown id fails here; workers get the spec, not the id
     env_fns = [functools.partial(make_indexed_env, spec, i, env_kwargs) for i in range(num_envs)]
     mode = SAME_STEP
     if backend == "ray":
@@ -527,6 +528,18 @@ def make_sb3_vec_env(
     if seed is not None:
         venv.seed(seed)
     return venv
+
+
+def _env_spec(env_id: Any) -> EnvSpec:
+    """The registered spec of ``env_id`` (an id or an ``EnvSpec``), looked up here."""
+    if isinstance(env_id, EnvSpec):
+        return env_id
+    if not isinstance(env_id, str):
+        raise TypeError(
+            f"env_id={env_id!r}: expected a registered Gymnasium id (a str); for env "
+            "factories use RayVecEnv(env_fns) or SerialVecEnv(env_fns)"
+        )
+    return gym.spec(env_id)
 
 
 def _equal(a: Any, b: Any) -> bool:
