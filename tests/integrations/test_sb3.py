@@ -355,15 +355,27 @@ def test_bad_input_names_the_value() -> None:
         make_sb3_vec_env(CARTPOLE, 2, "gpu")
     with pytest.raises(ValueError, match="num_envs=0"):
         make_sb3_vec_env(CARTPOLE, 0, "serial")
+    with pytest.raises(TypeError, match="env_id=<function.*expected a registered Gymnasium id"):
+        make_sb3_vec_env(lambda: gym.make(CARTPOLE), 2, "serial")
+    with pytest.raises(gym.error.NameNotFound, match="NoSuch"):
+        make_sb3_vec_env("chronogym/NoSuch-v0", 2, "ray")  # in the driver, before any worker
+    from_spec = make_sb3_vec_env(gym.spec(CARTPOLE), 2, "serial")
+    assert from_spec.get_attr("spec")[0].id == CARTPOLE
+    from_spec.close()
     venv = make_sb3_vec_env(CARTPOLE, 3, "serial")
     try:
-        for bad in (3, -1, [0, 5], [1, 1], "0", [True], 1.0):
-            with pytest.raises(ValueError, match=rf"indices={bad!r}".replace("[", r"\[")):
+        for bad, error in (
+            (3, IndexError),
+            ([0, -4], IndexError),
+            ("0", TypeError),
+            (1.0, TypeError),
+        ):
+            with pytest.raises(error, match=rf"indices={bad!r}".replace("[", r"\[")):
                 venv.get_attr("np_random_seed", indices=bad)
-        with pytest.raises(ValueError, match=r"indices=\[4\]"):
+        with pytest.raises(chronogym.BoolArgumentError, match=r"indices=\[True\] holds the bool"):
+            venv.get_attr("np_random_seed", indices=[True])
+        with pytest.raises(IndexError, match=r"indices=\[4\]"):
             venv.set_attr("gain", 1.0, indices=[4])
-        with pytest.raises(ValueError, match=r"indices=\[0, 0\]"):
-            venv.env_method("reset", indices=[0, 0])
         with pytest.raises(RuntimeError, match="step_async"):
             venv.step_wait()
     finally:

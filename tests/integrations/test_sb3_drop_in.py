@@ -184,6 +184,39 @@ def test_indices_touch_only_the_chosen_envs(backend: str, request: pytest.Fixtur
         venv.close()
 
 
+# Every form SB3's VecEnv._get_indices and DummyVecEnv take: None, an int, an iterable.
+SB3_INDICES = [None, 2, -1, [3, 0], [-1, -4], [1, 1, 2], (0, 2), range(1, 4), np.array([2, 0])]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_indices_follow_sb3s_convention(backend: str, request: pytest.FixtureRequest) -> None:
+    """Each form of ``indices`` picks the envs DummyVecEnv picks, in its order and as many
+    times (negative and repeated indices included); bad ones raise DummyVecEnv's class."""
+    reference = build("dummy", [PlainEnv] * 4, request)
+    venv = build(backend, [PlainEnv] * 4, request)
+    try:
+        for env in (reference, venv):
+            env.set_attr("counter", 0)
+            env.set_attr("counter", 10, indices=[-1, 1, -1])
+        for indices in SB3_INDICES:
+            want = reference.env_method("bump", indices=indices)
+            assert venv.env_method("bump", indices=indices) == want, indices
+            want = reference.get_attr("counter", indices=indices)
+            assert venv.get_attr("counter", indices=indices) == want, indices
+        assert venv.get_attr("counter") == reference.get_attr("counter") == [5, 14, 6, 15]
+        assert venv.get_attr("counter", indices=(i for i in (-3, 0))) == [14, 5]
+        assert venv.get_attr("counter", indices=[]) == reference.get_attr("counter", indices=[])
+        assert venv.env_is_wrapped(Marker, indices=-2) == [False]
+        for bad in (4, -5, [0, 4], ["0"], [1.0], 1.5):
+            with pytest.raises(Exception) as sb3_error:
+                reference.get_attr("counter", indices=bad)
+            with pytest.raises(sb3_error.type, match=r"indices=.*integer with -num_envs <="):
+                venv.get_attr("counter", indices=bad)
+    finally:
+        venv.close()
+        reference.close()
+
+
 # -- SB3's make_vec_env, checks and wrappers -------------------------------------------
 @pytest.mark.parametrize("cls", [RayVecEnv, SerialVecEnv])
 def test_make_vec_env_builds_it(cls: type, request: pytest.FixtureRequest) -> None:
@@ -326,7 +359,7 @@ def test_bad_input_names_the_value() -> None:
             venv.step([{"mode": 1}, {"mode": 1}])  # no 'position'
         with pytest.raises(ValueError, match="actions='ab'"):
             venv.step("ab")
-        with pytest.raises(ValueError, match=r"indices=\[2\]"):
+        with pytest.raises(IndexError, match=r"indices=\[2\]: index 2 is out of range"):
             venv.env_method("bump", indices=[2])
         _, _, dones, _ = venv.step([good, good])  # still works after the errors
         assert dones.shape == (2,)

@@ -26,6 +26,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.vector import AutoresetMode
 
 try:
@@ -43,9 +44,11 @@ except ImportError as error:  # pragma: no cover - exercised in a subprocess by 
     ) from error
 
 import chronogym
+from chronogym.errors import BoolArgumentError
 from chronogym.integrations._indexed import (
     HOOK,
     INDEX_ATTR,
+    DriverRegistry,
     build_indexed_env,
     make_indexed_env,
 )
@@ -297,27 +300,44 @@ class SB3VecEnv(VecEnv):
 
     def _on_envs(self, op: str, chosen: list[int] | None, *args: Any) -> list[Any]:
         """Run ``op`` of :class:`~chronogym.integrations._indexed.IndexedEnv` on the chosen
-        envs (None: all) only; their results in ``chosen`` order."""
+        envs (None: all) only, once per time an env is chosen; the results in ``chosen``
+        order."""
         chosen = list(range(self.num_envs)) if chosen is None else chosen
-        return self._pick(self.vector_env.call(HOOK, op, chosen, *args), chosen)
+        if not chosen:
+            return []
+        per_env = [iter(r or ()) for r in self.vector_env.call(HOOK, op, chosen, *args)]
+        return [next(per_env[i]) for i in chosen]
 
     def _indices(self, indices: VecEnvIndices) -> list[int]:
-        """``indices`` as a list of distinct env indices, checked."""
+        """``indices`` as a list of env indices in 0..num_envs-1, by SB3's convention.
+
+        As ``VecEnv._get_indices`` and ``DummyVecEnv`` read it: None is every env, an
+        integer one env, any other iterable its integers in order; an index counts from
+        the end when negative (-1 is the last env), and one given twice is used twice.
+        Out of range: ``IndexError``; not an integer: ``TypeError``, as with SB3 (a bool
+        raises :class:`chronogym.BoolArgumentError`).
+        """
         n = self.num_envs
         if indices is None:
             return list(range(n))
-        items = [indices] if isinstance(indices, (int, np.integer)) else indices
+        expected = (
+            f"expected None, an env index or an iterable of env indices, each an integer "
+            f"with -num_envs <= index < num_envs={n} (negative counts from the end)"
+        )
+        scalar = is_int(indices) or isinstance(indices, (bool, np.bool_))
+        items = [indices] if scalar else indices
         try:
-            chosen = list(items)  # type: ignore[arg-type]
+            chosen = list(items)  # type: ignore[call-overload]
         except TypeError:
-            chosen = None
-        bad = chosen is None or any(not is_int(i) or not 0 <= i < n for i in chosen)
-        if bad or len(set(chosen)) != len(chosen):  # type: ignore[arg-type]
-            raise ValueError(
-                f"indices={indices!r}: expected None, an env index or a sequence of distinct env "
-                f"indices, each an integer with 0 <= index < num_envs={n}"
-            )
-        return [int(i) for i in chosen]  # type: ignore[union-attr]
+            raise TypeError(f"indices={indices!r}: {expected}") from None
+        for i in chosen:
+            if isinstance(i, (bool, np.bool_)):
+                raise BoolArgumentError(f"indices={indices!r} holds the bool {i!r}; {expected}")
+            if not is_int(i):
+                raise TypeError(f"indices={indices!r} holds {i!r}, not an integer; {expected}")
+            if not -n <= i < n:
+                raise IndexError(f"indices={indices!r}: index {i} is out of range; {expected}")
+        return [int(i) % n for i in chosen]
 
     def _is_all(self, chosen: list[int]) -> bool:
         return chosen == list(range(self.num_envs))
@@ -350,11 +370,16 @@ class _FactoryVecEnv(SB3VecEnv):
 
     _per_env_options = True
 
+    #: Whether the envs are built in other processes, which lack the ids registered in
+    #: the user's script (the driver's registry travels with the factories).
+    _remote = False
+
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], **vector_kwargs: Any) -> None:
-        fns = _indexed_env_fns(env_fns, vector_kwargs, type(self).__name__)
+        fns = _indexed_env_fns(env_fns, vector_kwargs, type(self).__name__, self._remote)
         vector_env = self._vector_env(fns, vector_kwargs)
         try:
-            identities = vector_env.call(HOOK, "identity", list(range(vector_env.num_envs)))
+            everyone = list(range(vector_env.num_envs))
+            identities = [r[0] for r in vector_env.call(HOOK, "identity", everyone)]
             if len(set(identities)) != len(identities):
                 raise ValueError(
                     f"{type(self).__name__}: the factories returned the same env instance for "
@@ -386,8 +411,13 @@ class RayVecEnv(_FactoryVecEnv):
     so ``get_attr``, ``set_attr``, ``env_method``, ``env_is_wrapped`` with ``indices``
     touch only those envs (attributes and methods only some envs have included);
     ``set_options`` may give each env its own dict. An env whose worker dies is rebuilt
-    and its episode ends truncated (``worker_restarted`` in its info).
+    and its episode ends truncated (``worker_restarted`` in its info). A factory that
+    makes an id registered in the user's script (as ``make_vec_env("newuser/Task-v0",
+    vec_env_cls=RayVecEnv)`` does) works on the workers: the driver's registered ids
+    travel with the factories.
     """
+
+    _remote = True
 
     @staticmethod
     def _vector_env(fns: list[Any], vector_kwargs: dict[str, Any]) -> gym.vector.VectorEnv:
@@ -408,9 +438,13 @@ class SerialVecEnv(_FactoryVecEnv):
 
 
 def _indexed_env_fns(
-    env_fns: Any, vector_kwargs: dict[str, Any], owner: str
+    env_fns: Any, vector_kwargs: dict[str, Any], owner: str, remote: bool = False
 ) -> list[functools.partial]:
-    """``env_fns`` checked, each wrapped to build its env in an ``IndexedEnv``."""
+    """``env_fns`` checked, each wrapped to build its env in an ``IndexedEnv``.
+
+    ``remote``: the envs are built in Ray workers, which get the driver's registry
+    (:class:`~chronogym.integrations._indexed.DriverRegistry`) with the factories.
+    """
     expected = (
         "expected a list of callables, each returning a new gymnasium.Env (as for "
         "SubprocVecEnv); for an env id use make_vec_env(env_id, n_envs, "
@@ -434,11 +468,19 @@ def _indexed_env_fns(
             f"{owner}(env_kwargs={vector_kwargs['env_kwargs']!r}): env_kwargs apply to env ids; "
             "with factories, pass the keyword arguments inside each factory"
         )
-    return [functools.partial(build_indexed_env, fn, i) for i, fn in enumerate(env_fns)]
+    registry = DriverRegistry(_ray_dumps()) if remote else None
+    return [functools.partial(build_indexed_env, fn, i, registry) for i, fn in enumerate(env_fns)]
+
+
+def _ray_dumps() -> Callable[[Any], bytes]:
+    """Ray's cloudpickle ``dumps`` (it honours ``register_pickle_by_value``)."""
+    from ray import cloudpickle
+
+    return cloudpickle.dumps
 
 
 def make_sb3_vec_env(
-    env_id: str,
+    env_id: str | EnvSpec,
     num_envs: int,
     backend: str = "ray",
     *,
@@ -453,6 +495,8 @@ def make_sb3_vec_env(
     ``env_kwargs`` go to ``gymnasium.make``, other keyword arguments to the vector env.
     Each env knows its index, so ``indices=`` reaches only those envs. ``seed``: as
     SB3's ``make_vec_env``, the first ``reset()`` seeds env i with ``seed + i``.
+    ``env_id`` is looked up here and its spec sent to the envs, so an id registered in
+    the user's script works on every backend.
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend={backend!r}: expected one of {BACKENDS}")
@@ -463,7 +507,8 @@ def make_sb3_vec_env(
             f"autoreset_mode={mode!r}: make_sb3_vec_env needs AutoresetMode.SAME_STEP "
             "(SB3 resets an env in the step that ends it); leave autoreset_mode out"
         )
-    env_fns = [functools.partial(make_indexed_env, env_id, i, env_kwargs) for i in range(num_envs)]
+    spec = _env_spec(env_id)  # an unknown id fails here; workers get the spec, not the id
+    env_fns = [functools.partial(make_indexed_env, spec, i, env_kwargs) for i in range(num_envs)]
     mode = SAME_STEP
     if backend == "ray":
         vector_env: gym.vector.VectorEnv = chronogym.RayVectorEnv(
@@ -483,6 +528,18 @@ def make_sb3_vec_env(
     if seed is not None:
         venv.seed(seed)
     return venv
+
+
+def _env_spec(env_id: Any) -> EnvSpec:
+    """The registered spec of ``env_id`` (an id or an ``EnvSpec``), looked up here."""
+    if isinstance(env_id, EnvSpec):
+        return env_id
+    if not isinstance(env_id, str):
+        raise TypeError(
+            f"env_id={env_id!r}: expected a registered Gymnasium id (a str); for env "
+            "factories use RayVecEnv(env_fns) or SerialVecEnv(env_fns)"
+        )
+    return gym.spec(env_id)
 
 
 def _equal(a: Any, b: Any) -> bool:

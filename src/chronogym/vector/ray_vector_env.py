@@ -57,8 +57,9 @@ class RayVectorEnv(WorkerVectorEnv):
         envs_per_worker: simulations per actor; one remote call steps them all.
             Default: spread the envs over the cluster's CPUs
             (``ceil(num_envs / CPUs)``).
-        num_cpus, num_gpus: resources per actor (fractions allowed). Default
-            ``num_cpus``: the cluster's CPUs shared evenly, at most 1 each.
+        num_cpus: CPUs per actor (fractions allowed). Default: the cluster's
+            CPUs shared evenly, at most 1 each.
+        num_gpus: GPUs per actor (fractions allowed). Default 0.
         address: Ray cluster address; default ``RAY_ADDRESS``, else a local
             cluster is started (no dashboard).
         worker_niceness: nice value of the workers of a local cluster this
@@ -75,6 +76,9 @@ class RayVectorEnv(WorkerVectorEnv):
         invalid_action: ``"raise"`` (default) or ``"clip"`` for NaN/Inf actions.
         step_timeout: seconds a worker may take for one call before it is
             treated as lost and replaced (default: wait forever).
+        start_timeout: seconds the workers may take to start and build their
+            envs before the cluster is taken to lack room for them (an error
+            says so). Default 120.
         env_kwargs: keyword arguments for ``gymnasium.make`` when ``env_fns``
             is an id.
         transport: how the barrier ``step`` reaches the workers. ``"socket"``
