@@ -427,8 +427,8 @@ class RayVecEnv(_FactoryVecEnv):
 class SerialVecEnv(_FactoryVecEnv):
     """:class:`RayVecEnv`'s twin in this process (:class:`chronogym.SerialVectorEnv`).
 
-    Same arguments (``vector_kwargs`` for ``SerialVectorEnv``: ``envs_per_worker``, ``max_restarts``,
-    ``invalid_action``), same numbers and the same per-env ``indices=`` as
+    Same arguments (``vector_kwargs`` for ``SerialVectorEnv``: ``envs_per_worker``,
+    ``max_restarts``, ``invalid_action``), same numbers and the same per-env ``indices=`` as
     :class:`RayVecEnv`, SB3's ``DummyVecEnv`` and ``SubprocVecEnv``; no Ray.
     """
 
