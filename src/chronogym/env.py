@@ -180,7 +180,6 @@ class SimEnv(gym.Env):
             value = dataclasses.replace(value, max_episode_steps=self.max_episode_steps)
         self._spec = value
 
-
     def __init__(
         self,
         task: Task,
