@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-WORKERS = {"ray::SocketWorker", "ray::EnvGroup"}  # socket transport (default), actor transport
+WORKERS = {"ray::SocketWorker", "ray::ActorGroup"}  # socket transport (default), actor transport
 RAY_PROCESSES = {"gcs_server", "raylet", "ray::RuntimeEnvAgent", *WORKERS, "ray_ports.py"}
 
 

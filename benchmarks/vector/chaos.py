@@ -3,7 +3,7 @@ lander study on a 3-node loopback cluster, then prove that nothing was lost.
 
 The cluster is ``chronogym.testing.LocalCluster`` (head + 2 worker nodes, 1 CPU each,
 ``ray start`` subprocesses). A killer thread with its own seeded RNG picks a random
-worker process of *this* cluster (``ray::SocketWorker`` or ``ray::EnvGroup`` during
+worker process of *this* cluster (``ray::SocketWorker`` or ``ray::ActorGroup`` during
 training, ``ray::TrialWorker`` during the study; other Ray clusters on the machine are never
 touched) at random intervals and SIGKILLs it, and once per phase kills every process of one
 worker node (raylet, agents, actors).
@@ -49,7 +49,7 @@ from chronogym.testing import LocalCluster
 DEFAULT_OUT = RESULTS / "chaos.json"
 #: Process titles of RayVectorEnv's workers: the socket transport's actor class is SocketWorker
 #: (an EnvGroup), the actor transport's EnvGroup.
-ENV_WORKERS = ("ray::EnvGroup", "ray::SocketWorker")
+ENV_WORKERS = ("ray::ActorGroup", "ray::SocketWorker")
 
 
 @dataclass(frozen=True)
