@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
+from user_scripts import DRIFT_TASK, run_user_script
 
 import chronogym
 from chronogym import RayVectorEnv, SerialVectorEnv, SimEnv, register_task
@@ -139,41 +140,8 @@ def test_vector_entry_point_bad_backend_and_options_name_the_value():
         gym.make_vec(CARTPOLE, 2, vectorization_mode="vector_entry_point", vector_options=[2])
 
 
-SCRIPT = textwrap.dedent(
+SCRIPT = DRIFT_TASK + textwrap.dedent(
     """
-    import gymnasium as gym
-    import numpy as np
-    import ray
-    from gymnasium import spaces
-
-    import chronogym
-    from chronogym import register_task
-
-
-    class Drift(chronogym.Task):
-        dt, k, max_episode_steps = 0.1, 1, 7
-
-        def init(self):
-            self.advanceables = []
-            self.observation_space = spaces.Box(-np.inf, np.inf, (1,), np.float64)
-            self.action_space = spaces.Box(-1, 1, (1,), np.float32)
-
-        def reset(self, rng, options):
-            self.x = float(rng.uniform(-1, 1))
-
-        def apply_action(self, action):
-            self.x += float(action[0])
-
-        def observe(self):
-            return np.array([self.x])
-
-        def reward(self, action, obs):
-            return -abs(self.x)
-
-        def terminated(self, obs):
-            return abs(self.x) > 3
-
-
     register_task("newuser/Drift-v0", Drift)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
 
@@ -199,11 +167,7 @@ SCRIPT = textwrap.dedent(
 
 
 def test_vector_entry_point_with_an_id_registered_in_the_users_script(tmp_path):
-    script = tmp_path / "user_script.py"
-    script.write_text(SCRIPT)
-    done = subprocess.run(
-        [sys.executable, str(script)], capture_output=True, text=True, timeout=240, cwd=tmp_path
-    )
+    done = run_user_script(tmp_path, SCRIPT)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "same numbers (4, 81)" in done.stdout
 

@@ -6,8 +6,6 @@ they lack its ids unless chronogym sends them (NamespaceNotFound before this was
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import textwrap
 
 import cloudpickle
@@ -15,6 +13,8 @@ import gymnasium as gym
 import pytest
 
 pytest.importorskip("stable_baselines3")
+
+from user_scripts import run_user_script
 
 from chronogym.integrations._indexed import DriverRegistry, build_indexed_env
 
@@ -98,11 +98,7 @@ SCRIPT = textwrap.dedent(
 
 
 def test_script_registered_id_works_through_both_sb3_routes(tmp_path):
-    script = tmp_path / "user_script.py"
-    script.write_text(SCRIPT)
-    done = subprocess.run(
-        [sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path
-    )
+    done = run_user_script(tmp_path, SCRIPT, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     for route in ("make_vec_env", "make_sb3_vec_env"):
         assert f"{route} same numbers as DummyVecEnv (9, 4, 4)" in done.stdout, done.stdout

@@ -2,50 +2,16 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import textwrap
 
 import gymnasium as gym
 import pytest
+from user_scripts import DRIFT_TASK, run_user_script
 
 from chronogym import RayVectorEnv, SerialVectorEnv
 
-SCRIPT = textwrap.dedent(
+SCRIPT = DRIFT_TASK + textwrap.dedent(
     """
-    import gymnasium as gym
-    import numpy as np
-    import ray
-    from gymnasium import spaces
-
-    import chronogym
-    from chronogym import register_task
-
-
-    class Drift(chronogym.Task):
-        dt, k, max_episode_steps = 0.1, 1, 7
-
-        def init(self):
-            self.advanceables = []
-            self.observation_space = spaces.Box(-np.inf, np.inf, (1,), np.float64)
-            self.action_space = spaces.Box(-1, 1, (1,), np.float32)
-
-        def reset(self, rng, options):
-            self.x = float(rng.uniform(-1, 1))
-
-        def apply_action(self, action):
-            self.x += float(action[0])
-
-        def observe(self):
-            return np.array([self.x])
-
-        def reward(self, action, obs):
-            return -abs(self.x)
-
-        def terminated(self, obs):
-            return abs(self.x) > 3
-
-
     register_task("me/Drift-v0", Drift)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
 
@@ -65,11 +31,7 @@ SCRIPT = textwrap.dedent(
 
 
 def test_id_registered_in_the_users_script_runs_on_workers(tmp_path):
-    script = tmp_path / "user_script.py"
-    script.write_text(SCRIPT)
-    done = subprocess.run(
-        [sys.executable, str(script)], capture_output=True, text=True, timeout=240, cwd=tmp_path
-    )
+    done = run_user_script(tmp_path, SCRIPT)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "same numbers (21, 4, 1)" in done.stdout
 
