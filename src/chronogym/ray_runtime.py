@@ -3,6 +3,7 @@ starting) a cluster, sizing actors, and starting actors that may die before they
 
 from __future__ import annotations
 
+import importlib.abc
 import importlib.util
 import logging
 import math
@@ -51,13 +52,33 @@ def _mujoco_warning(message: str) -> None:
         print(f"MuJoCo warning: {message}", file=sys.stderr, flush=True)
 
 
-def quiet_mujoco_warnings() -> None:
-    """Install :func:`_mujoco_warning` as MuJoCo's warning handler where MuJoCo is installed."""
-    if importlib.util.find_spec("mujoco") is None:
-        return
-    import mujoco
+class _QuietMujocoOnImport(importlib.abc.MetaPathFinder):
+    """Installs :func:`_mujoco_warning` right after ``mujoco`` is first imported, so that a
+    worker whose envs never use MuJoCo never pays for importing it."""
 
-    mujoco.set_mju_user_warning(_mujoco_warning)
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if name != "mujoco":
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is not None and spec.loader is not None:
+            exec_module = spec.loader.exec_module
+
+            def exec_and_quiet(module: Any) -> None:
+                exec_module(module)
+                module.set_mju_user_warning(_mujoco_warning)
+
+            spec.loader.exec_module = exec_and_quiet  # type: ignore[method-assign]
+        return spec
+
+
+def quiet_mujoco_warnings() -> None:
+    """Make :func:`_mujoco_warning` MuJoCo's warning handler: now if MuJoCo is imported,
+    else as soon as it is (without importing it)."""
+    if "mujoco" in sys.modules:
+        sys.modules["mujoco"].set_mju_user_warning(_mujoco_warning)
+    elif not any(isinstance(f, _QuietMujocoOnImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, _QuietMujocoOnImport())
 
 
 quiet_ray_auth_advice()

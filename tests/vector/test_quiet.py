@@ -67,3 +67,27 @@ def test_ray_auth_filter_drops_only_the_opt_out_advice():
     finally:
         ray_logger.removeHandler(handler)
     assert [r.getMessage()[:37] for r in records] == ["Token authentication is disabled for "]
+
+
+def test_the_mujoco_handler_waits_for_mujocos_own_import(tmp_path):
+    script = textwrap.dedent(
+        """
+        import sys
+        from chronogym.ray_runtime import _mujoco_warning, quiet_mujoco_warnings
+
+        quiet_mujoco_warnings()
+        assert "mujoco" not in sys.modules  # a worker without MuJoCo envs never imports it
+        import mujoco
+        from pathlib import Path
+        import gymnasium.envs.mujoco as gym_mujoco
+
+        assert mujoco.get_mju_user_warning() is _mujoco_warning
+        xml = Path(gym_mujoco.__file__).parent / "assets" / "half_cheetah.xml"
+        mujoco.MjModel.from_xml_path(str(xml))  # sets settotalmass
+        print("OK")
+        """
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert run.returncode == 0 and run.stdout == "OK\n" and run.stderr == "", run.stderr
