@@ -3,10 +3,13 @@ starting) a cluster, sizing actors, and starting actors that may die before they
 
 from __future__ import annotations
 
+import importlib.abc
+import importlib.util
 import logging
 import math
 import os
 import socket
+import sys
 import time
 import warnings
 from collections.abc import Callable
@@ -15,6 +18,70 @@ from typing import Any
 from chronogym.validation import check_int, check_number
 
 logger = logging.getLogger("chronogym")
+
+#: The Ray logger that advises ``RAY_AUTH_MODE=disabled`` at every local start, and the
+#: start of that one message. Token auth stays on (docs/guides/security.md); only the
+#: advice to turn it off is dropped. Ray's other lines from that logger still print.
+RAY_AUTH_LOGGER = "ray._private.authentication.authentication_token_setup"
+RAY_AUTH_ADVICE = "Token authentication is enabled for this Ray cluster"
+
+#: MuJoCo warnings that workers drop: deprecations in third-party models (Gymnasium's
+#: half_cheetah.xml sets ``settotalmass``), which users cannot act on. Any other MuJoCo
+#: warning is printed on stderr as one line.
+MUJOCO_QUIET = ("compiler attribute 'settotalmass' is deprecated",)
+
+
+class _DropRayAuthAdvice(logging.Filter):
+    """Drops Ray's "Set RAY_AUTH_MODE=disabled to opt out" advice, nothing else."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(RAY_AUTH_ADVICE)
+
+
+def quiet_ray_auth_advice() -> None:
+    """Filter Ray's advice to disable token auth (idempotent; does not import Ray)."""
+    ray_logger = logging.getLogger(RAY_AUTH_LOGGER)
+    if not any(isinstance(f, _DropRayAuthAdvice) for f in ray_logger.filters):
+        ray_logger.addFilter(_DropRayAuthAdvice())
+
+
+def _mujoco_warning(message: str) -> None:
+    """MuJoCo's warning callback in workers: drop ``MUJOCO_QUIET``, print the rest as one
+    line (MuJoCo's own handler adds an empty line and writes MUJOCO_LOG.TXT to the cwd)."""
+    if not message.startswith(MUJOCO_QUIET):
+        print(f"MuJoCo warning: {message}", file=sys.stderr, flush=True)
+
+
+class _QuietMujocoOnImport(importlib.abc.MetaPathFinder):
+    """Installs :func:`_mujoco_warning` right after ``mujoco`` is first imported, so that a
+    worker whose envs never use MuJoCo never pays for importing it."""
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if name != "mujoco":
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is not None and spec.loader is not None:
+            exec_module = spec.loader.exec_module
+
+            def exec_and_quiet(module: Any) -> None:
+                exec_module(module)
+                module.set_mju_user_warning(_mujoco_warning)
+
+            spec.loader.exec_module = exec_and_quiet  # type: ignore[method-assign]
+        return spec
+
+
+def quiet_mujoco_warnings() -> None:
+    """Make :func:`_mujoco_warning` MuJoCo's warning handler: now if MuJoCo is imported,
+    else as soon as it is (without importing it)."""
+    if "mujoco" in sys.modules:
+        sys.modules["mujoco"].set_mju_user_warning(_mujoco_warning)
+    elif not any(isinstance(f, _QuietMujocoOnImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, _QuietMujocoOnImport())
+
+
+quiet_ray_auth_advice()
 
 
 def _check_reachable(address: str, timeout: float = 5.0) -> None:
@@ -76,6 +143,7 @@ def ensure_ray(address: str | None = None, worker_niceness: int | None = WORKER_
     """
     import ray
 
+    quiet_ray_auth_advice()
     check_worker_niceness(worker_niceness)
     if address:
         _check_reachable(address)
@@ -89,7 +157,7 @@ def ensure_ray(address: str | None = None, worker_niceness: int | None = WORKER_
     extra = worker_niceness_env(worker_niceness)
     os.environ.update(extra)  # read by the raylet that ray.init starts
     try:
-        ray.init(include_dashboard=False, log_to_driver=True)
+        ray.init(include_dashboard=False, log_to_driver=True, logging_level=logging.WARNING)
     finally:
         for key in extra:
             os.environ.pop(key, None)

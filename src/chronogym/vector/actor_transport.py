@@ -12,7 +12,7 @@ import contextlib
 import traceback
 from typing import Any
 
-from chronogym.ray_runtime import actor_scheduling, start_with_retries
+from chronogym.ray_runtime import actor_scheduling, quiet_mujoco_warnings, start_with_retries
 from chronogym.vector.backend import Outcome, error_outcome
 from chronogym.vector.group import EnvGroup
 
@@ -24,6 +24,10 @@ class ActorGroup(EnvGroup):
     answer would be pickled whole. The driver reads them back with ``StepAnswer.of`` /
     ``ResetAnswer.of`` (:mod:`chronogym.vector.backend`).
     """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        quiet_mujoco_warnings()  # before the envs compile their models
+        super().__init__(*args, **kwargs)
 
     def reset(self, *args: Any, **kwargs: Any) -> tuple[Any, ...]:  # type: ignore[override]
         return super().reset(*args, **kwargs).as_tuple()
