@@ -143,6 +143,11 @@ def _usable_render_modes(task: Task, render_mode: Any) -> list[str]:
         why = f"{name} renders {declared} only"
         if render_mode == "human":
             why += " (for a window, wrap it in gymnasium.wrappers.HumanRendering)"
+    if reason:  # the reason says what to set up; until then, only None works here
+        raise ValueError(
+            f"render_mode={render_mode!r}: {why}; until then, expected render_mode=None "
+            "(runs without rendering)"
+        )
     expected = " or ".join(repr(m) for m in [None, *usable])
     raise ValueError(f"render_mode={render_mode!r}: {why}; expected {expected}")
 

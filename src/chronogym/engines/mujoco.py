@@ -34,7 +34,7 @@ def check_headless_gl() -> None:
 
 GL_HINT = (
     "install EGL (apt-get install libegl1 libgl1-mesa-dri) or OSMesa (apt-get install "
-    "libosmesa6, then MUJOCO_GL=osmesa); see README 'Rendering'"
+    "libosmesa6, then MUJOCO_GL=osmesa); see docs/guides/rendering.md"
 )
 
 

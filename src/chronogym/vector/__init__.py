@@ -32,8 +32,8 @@ transport, hop by hop (file: function):
 ``send`` / ``recv`` (and ``step_async`` / ``step_wait``, ``async_reset``) take the same
 hops, except that the calls wait in ``in_flight.py``: ``InFlight.submit`` /
 ``InFlight.collect`` (``Backend.wait``, then ``Backend.gather``) until enough envs
-have answered, and ``_pending_result`` reads each answer. The docs' "How it works"
-section of the vector envs guide (docs/guides/vector-envs.md) draws the same path.
+have answered, and ``_pending_result`` reads each answer. The docs' "How it works" page
+(docs/how-it-works.md) tells the whole story: processes, what travels, where faults are caught.
 
 :mod:`chronogym.optim.parallel` runs its Optuna trials on the same machinery: an
 ``ActorBackend`` (or ``LocalBackend``) of ``TrialWorker``s and an ``InFlight``.
