@@ -149,14 +149,10 @@ def gather_split(
 ) -> list[Outcome]:
     """Outcomes of ``handles`` in order: ``resolve`` each handle of type ``own``, and
     ``gather_others`` the rest in one call (the local/remote split of a backend)."""
-    outcomes: list[Outcome | None] = []
-    others: list[int] = []
-    for k, handle in enumerate(handles):
-        if isinstance(handle, own):
-            outcomes.append(resolve(handle))
-        else:
-            outcomes.append(None)
-            others.append(k)
+    mine, others = split_handles(handles, own)
+    outcomes: list[Outcome | None] = [None] * len(handles)
+    for k in mine:
+        outcomes[k] = resolve(handles[k])
     if others:
         gathered = gather_others([workers[k] for k in others], [handles[k] for k in others])
         for k, outcome in zip(others, gathered, strict=True):
