@@ -49,11 +49,48 @@ NODE_PORT_FLAGS = (
 )
 
 
+#: How often :meth:`LocalCluster.start` retries with fresh ports after a port clash.
+PORT_RETRIES = 2
+#: What ``ray start`` logs when a port it was given is taken.
+PORT_CLASH_SIGNS = ("used by other components", "Address already in use", "Failed to bind")
+
+
+class NodeStartError(RuntimeError):
+    """A node's ``ray start`` exited during start-up; ``port_clash`` says whether a port
+    it was given was taken (worth a retry with fresh ports)."""
+
+    def __init__(self, message: str, port_clash: bool = False) -> None:
+        super().__init__(message)
+        self.port_clash = port_clash
+
+
 def free_port() -> int:
     """A TCP port that nothing listens on right now (loopback)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+    return free_ports(1)[0]
+
+
+def free_ports(count: int, exclude: set[int] | frozenset[int] = frozenset()) -> list[int]:
+    """``count`` distinct loopback ports that nothing listens on now, none in ``exclude``.
+
+    The probe sockets stay bound until all are picked, so the kernel cannot hand the same
+    port out twice (two separate :func:`free_port` calls can, and Ray then refuses to start
+    with "port ... is used by other components").
+    """
+    check_int("count", count, 0)
+    held: list[socket.socket] = []
+    ports: list[int] = []
+    try:
+        while len(ports) < count:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            held.append(sock)
+            sock.bind(("127.0.0.1", 0))
+            port = int(sock.getsockname()[1])
+            if port not in exclude:
+                ports.append(port)
+    finally:
+        for sock in held:
+            sock.close()
+    return ports
 
 
 def ray_executable() -> str:
@@ -174,6 +211,7 @@ class LocalCluster:
     port: int | None = field(default=None, init=False)
     token: str = field(default_factory=lambda: secrets.token_hex(32), init=False, repr=False)
     _saved_env: dict[str, str | None] = field(default_factory=dict, init=False, repr=False)
+    _ports_used: set[int] = field(default_factory=set, init=False, repr=False)
 
     def __post_init__(self) -> None:
         for name in ("workers", "num_cpus", "object_store_mb"):
@@ -204,11 +242,26 @@ class LocalCluster:
 
     # -- life cycle -------------------------------------------------------------------
     def start(self) -> LocalCluster:
-        """Start the head, then the worker nodes; return once every node is alive."""
+        """Start the head, then the worker nodes; return once every node is alive.
+
+        A node that exits because a port picked for it was taken meanwhile (another
+        process can bind it between the pick and ``ray start``) is retried with fresh
+        ports, up to ``PORT_RETRIES`` times; any other failure raises at once.
+        """
         if self.nodes:
             raise RuntimeError("the cluster is already started")
+        for attempt in range(PORT_RETRIES + 1):
+            try:
+                return self._start_once()
+            except NodeStartError as error:
+                if not error.port_clash or attempt == PORT_RETRIES:
+                    raise
+        raise AssertionError("unreachable")
+
+    def _start_once(self) -> LocalCluster:
         self.temp_dir = Path(tempfile.mkdtemp(prefix="cgray-", dir="/tmp"))
-        self.port = free_port()
+        self._ports_used = set()
+        self.port = self._fresh_ports(1)[0]
         try:
             head_cpus = self.num_cpus if self.head_cpus is None else self.head_cpus
             self._launch("node_0", head_cpus, head=True)
@@ -216,6 +269,9 @@ class LocalCluster:
             for k in range(1, self.workers + 1):
                 self._launch(f"node_{k}", self.num_cpus, head=False)
             self._wait_alive(1 + self.workers)
+        except NodeStartError as error:
+            self.stop(keep_logs=not error.port_clash)
+            raise
         except BaseException:
             self.stop(keep_logs=True)
             raise
@@ -237,13 +293,14 @@ class LocalCluster:
             "--max-worker-port=0",
             "--disable-usage-stats",
         ]
-        args += [f"{flag}={free_port()}" for flag in NODE_PORT_FLAGS]
+        ports = self._fresh_ports(len(NODE_PORT_FLAGS) + 1)
+        args += [f"{flag}={port}" for flag, port in zip(NODE_PORT_FLAGS, ports, strict=False)]
         if head:
             args += [
                 "--head",
                 f"--port={self.port}",
                 "--include-dashboard=false",
-                f"--ray-client-server-port={free_port()}",
+                f"--ray-client-server-port={ports[-1]}",
             ]
         else:
             args += [f"--address={self.address}", "--include-log-monitor=false"]
@@ -255,6 +312,12 @@ class LocalCluster:
                 args, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True
             )
         self.nodes.append(NodeProcess(name, process, log_path))
+
+    def _fresh_ports(self, count: int) -> list[int]:
+        """``count`` free ports that no node of this cluster was given before."""
+        ports = free_ports(count, exclude=self._ports_used)
+        self._ports_used.update(ports)
+        return ports
 
     def _wait_gcs(self) -> None:
         """Wait until the head's GCS port accepts connections."""
@@ -276,10 +339,11 @@ class LocalCluster:
         """Raise with the log tail when a node's ``ray start`` has exited."""
         for node in self.nodes:
             if node.process.poll() is not None:
-                raise RuntimeError(
+                log = node.log_path.read_text()
+                raise NodeStartError(
                     f"`ray start` for {node.name} exited with code "
-                    f"{node.process.returncode}; log {node.log_path}:\n"
-                    f"{node.log_path.read_text()[-3000:]}"
+                    f"{node.process.returncode}; log {node.log_path}:\n{log[-3000:]}",
+                    port_clash=any(sign in log for sign in PORT_CLASH_SIGNS),
                 )
 
     def _wait_alive(self, count: int) -> None:
