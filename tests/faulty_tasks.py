@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import threading
+
 import numpy as np
 
 from chronogym.env import SimEnv
@@ -82,3 +85,62 @@ class HangingCartPole(CartPoleTask):
 
             time.sleep(600)
         super().apply_action(action)
+
+
+class UserBug(Exception):
+    """An exception class of the user's own (workers import it from this module)."""
+
+
+class UnpicklableError(Exception):
+    """An exception that cannot be pickled (it holds a lock)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.lock = threading.Lock()
+
+
+class BuggyCartPole(CartPoleTask):
+    """A task with a bug of the user's: ``bug`` says where it raises.
+
+    ``"init"``: in its constructor; ``"reset"``: in every reset; ``"step"``: at step ``at``;
+    ``"unpicklable"``: an unpicklable exception at step ``at``; ``"shape"``: observations
+    of the wrong shape from step ``at`` on; ``"exit_in_reset"``: its process exits (code 3)
+    in every reset (a fault, not a Python error).
+    """
+
+    def __init__(self, bug: str, at: int = 3, **kwargs) -> None:
+        if bug == "init":
+            raise UserBug("cannot load the model 'nowhere.xml'")
+        super().__init__(**kwargs)
+        self.bug, self.at, self.steps = bug, at, 0
+
+    def reset(self, rng, options) -> None:
+        if self.bug == "reset":
+            raise UserBug("the reset pose is out of range")
+        if self.bug == "exit_in_reset":
+            os._exit(3)
+        super().reset(rng, options)
+        self.steps = 0
+
+    def apply_action(self, action: np.ndarray) -> None:
+        self.steps += 1
+        if self.bug == "step" and self.steps == self.at:
+            raise UserBug(f"the controller diverged at step {self.steps}")
+        if self.bug == "unpicklable" and self.steps == self.at:
+            raise UnpicklableError(f"unpicklable failure at step {self.steps}")
+        super().apply_action(action)
+
+    def observe(self) -> np.ndarray:
+        obs = super().observe()
+        return obs[:2] if self.bug == "shape" and self.steps >= self.at else obs
+
+
+class BuggyEnv(SimEnv):
+    """``SimEnv(BuggyCartPole(bug, at))`` on the env ``bug_env`` (others: no bug), with a
+    method ``boom`` that raises."""
+
+    def __init__(self, bug: str, at: int = 3, bug_env: bool = True) -> None:
+        super().__init__(BuggyCartPole(bug if bug_env else "none", at))
+
+    def boom(self) -> None:
+        raise UserBug("boom() was called")

@@ -35,6 +35,8 @@ _EXPORTS = {
     "TaskDefinitionError": "chronogym.errors",
     "WorkerCrashLoopError": "chronogym.errors",
     "WorkerCallError": "chronogym.errors",
+    "WorkerEnvError": "chronogym.errors",
+    "RemoteTraceback": "chronogym.errors",
     "VectorEnvClosedError": "chronogym.errors",
     "EnvsInFlightError": "chronogym.errors",
     "RecvTimeoutError": "chronogym.errors",
@@ -53,10 +55,12 @@ if TYPE_CHECKING:
         DisabledAutoresetError,
         EnvsInFlightError,
         RecvTimeoutError,
+        RemoteTraceback,
         TaskDefinitionError,
         VectorEnvClosedError,
         WorkerCallError,
         WorkerCrashLoopError,
+        WorkerEnvError,
     )
     from chronogym.registration import make_sim_env, register_task
     from chronogym.task import FunctionTask, Task

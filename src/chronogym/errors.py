@@ -25,7 +25,47 @@ class TaskDefinitionError(ChronogymError, TypeError):
 
 
 class WorkerCrashLoopError(ChronogymError, RuntimeError):
-    """An environment kept failing after its restart budget was spent."""
+    """An environment kept failing: it failed again right after being rebuilt (a crash loop at
+    construction or reset), or it spent its restart budget (``max_restarts``).
+
+    ``traceback`` holds the last error's full text (the message keeps only its end).
+    """
+
+    def __init__(self, message: str, traceback: str = "") -> None:
+        super().__init__(message)
+        self.traceback = traceback
+
+    def __reduce__(self) -> tuple:
+        return (type(self), (str(self), self.traceback))
+
+
+class WorkerEnvError(ChronogymError, RuntimeError):
+    """An env raised inside a worker, and its exception could not be rebuilt in the driver.
+
+    With ``env_errors="raise"`` (the default) a vector env re-raises an env's exception in
+    the driver as its own class; when that class cannot travel (it does not pickle, or
+    the driver cannot import it) this is raised instead. ``type_name`` is the original
+    class's qualified name; the worker's traceback is chained as ``__cause__``.
+    """
+
+    def __init__(self, message: str, type_name: str = "") -> None:
+        super().__init__(message)
+        self.type_name = type_name
+
+    def __reduce__(self) -> tuple:
+        return (type(self), (str(self), self.type_name))
+
+
+class RemoteTraceback(Exception):
+    """The traceback of an exception raised in a worker process, chained as ``__cause__`` of
+    the exception re-raised in the driver (as ``concurrent.futures`` does)."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return self.text
 
 
 class WorkerCallError(ChronogymError, RuntimeError):

@@ -160,7 +160,9 @@ def test_replaced_env_reports_restart_in_step_info() -> None:
     from faulty_tasks import FailingEnv  # tests/faulty_tasks.py: fails at step 5 of seed 1
 
     factory = functools.partial(FailingEnv, 1)
-    venv = SB3VecEnv(chronogym.SerialVectorEnv([factory] * 2, autoreset_mode=SAME_STEP))
+    venv = SB3VecEnv(
+        chronogym.SerialVectorEnv([factory] * 2, autoreset_mode=SAME_STEP, env_errors="restart")
+    )
     try:
         venv.seed(0)
         obs = venv.reset()

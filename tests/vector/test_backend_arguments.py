@@ -99,7 +99,7 @@ def test_serial_names_an_unknown_argument_and_the_close_one():
         TypeError,
         match=r"^SerialVectorEnv\(\) got an unexpected keyword argument 'envs_per_workr'; "
         r"did you mean 'envs_per_worker'\? expected one of envs_per_worker, autoreset_mode, "
-        r"max_restarts, invalid_action, env_kwargs$",
+        r"max_restarts, invalid_action, env_kwargs, env_errors$",
     ):
         SerialVectorEnv(ENV_ID, 2, envs_per_workr=1)
 

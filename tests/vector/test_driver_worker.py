@@ -43,7 +43,7 @@ def test_partial_batches_match_sync_per_env(ray_cluster):
 def test_an_env_raising_in_the_driver_is_rebuilt_and_truncated(ray_cluster):
     seed = 11
     fns = [partial(FailingEnv, fail_seed=seed + 3 if i == 3 else None) for i in range(4)]
-    vec = RayVectorEnv(fns, envs_per_worker=2, driver_worker=True)
+    vec = RayVectorEnv(fns, envs_per_worker=2, driver_worker=True, env_errors="restart")
     run = vector_rollout(vec, 8, seed)
     vec.close()
     _, _, _, truncated, info = run[5]  # FailingEnv raises at its 5th step

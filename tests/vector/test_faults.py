@@ -75,7 +75,12 @@ def test_task_exception_restarts_only_that_env(ray_cluster, backend):
     seed = 11
     fns = [partial(FailingEnv, fail_seed=seed + 1 if i == 1 else None) for i in range(3)]
     undisturbed = vector_rollout(SerialVectorEnv([partial(FailingEnv, None)] * 3), 20, seed)
-    vec = RayVectorEnv(fns, envs_per_worker=3) if backend == "ray" else SerialVectorEnv(fns)
+    kwargs = {"env_errors": "restart"}
+    vec = (
+        RayVectorEnv(fns, envs_per_worker=3, **kwargs)
+        if backend == "ray"
+        else SerialVectorEnv(fns, **kwargs)
+    )
     run = vector_rollout(vec, 20, seed)
     _, _, _, truncated, info = run[5]  # FailingCartPole raises at its 5th step
     assert truncated.tolist() == [False, True, False]
@@ -89,7 +94,9 @@ def test_task_exception_restarts_only_that_env(ray_cluster, backend):
 
 
 def test_crash_loop_becomes_a_clear_error():
-    vec = SerialVectorEnv([partial(FailingEnv, None, fail_always=True)] * 2, max_restarts=2)
+    vec = SerialVectorEnv(
+        [partial(FailingEnv, None, fail_always=True)] * 2, max_restarts=2, env_errors="restart"
+    )
     vec.reset(seed=0)
     actions = np.zeros((2, 1), dtype=np.float32)
     with pytest.raises(WorkerCrashLoopError, match=r"env 0 failed 3 times.*max_restarts=2"):

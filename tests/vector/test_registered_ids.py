@@ -52,5 +52,6 @@ def test_unknown_id_fails_in_the_driver_before_any_worker_starts():
 def test_unimportable_entry_point_names_the_module_and_the_fix(ray_cluster, unimportable_id):
     with pytest.raises(ModuleNotFoundError, match="not_a_module_anywhere.*PYTHONPATH"):
         SerialVectorEnv(unimportable_id, 2)
-    with pytest.raises(RuntimeError, match="not_a_module_anywhere.*PYTHONPATH"):
-        RayVectorEnv(unimportable_id, 2, envs_per_worker=1)
+    with pytest.raises(ModuleNotFoundError, match="not_a_module_anywhere.*PYTHONPATH") as raised:
+        RayVectorEnv(unimportable_id, 2, envs_per_worker=1)  # the worker's own exception
+    assert f"env 0 ({unimportable_id}) in make()" in str(raised.value.__cause__)

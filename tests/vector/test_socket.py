@@ -48,7 +48,7 @@ def test_env_exception_comes_back_with_its_infos(ray_cluster):
     seed = 11
     fns = [partial(FailingEnv, fail_seed=seed + 1 if i == 1 else None) for i in range(3)]
     undisturbed = vector_rollout(SerialVectorEnv([partial(FailingEnv, None)] * 3), 20, seed)
-    vec = socket_env(fns, envs_per_worker=3)
+    vec = socket_env(fns, envs_per_worker=3, env_errors="restart")
     try:
         run = vector_rollout(vec, 20, seed)
         _, _, _, truncated, info = run[5]  # FailingCartPole raises at its 5th step

@@ -14,6 +14,7 @@ from typing import Any
 
 from chronogym.ray_runtime import actor_scheduling, quiet_mujoco_warnings, start_with_retries
 from chronogym.vector.backend import Outcome, error_outcome
+from chronogym.vector.env_errors import EnvRaised
 from chronogym.vector.group import EnvGroup
 
 
@@ -119,7 +120,10 @@ class ActorBackend:
             try:
                 outcomes.append(Outcome(True, ray.get(handle, timeout=self.step_timeout)))
             except ray.exceptions.RayTaskError as error:
-                outcomes.append(error_outcome(error.as_instanceof_cause(), str(error)))
+                if isinstance(error.cause, EnvRaised):  # an env's own exception: no Ray frames
+                    outcomes.append(Outcome(False, error.cause, error.cause.text))
+                else:
+                    outcomes.append(error_outcome(error.as_instanceof_cause(), str(error)))
             except ray.exceptions.GetTimeoutError:
                 message = f"no answer within step_timeout={self.step_timeout} s"
                 outcomes.append(Outcome(False, None, message, lost=True))

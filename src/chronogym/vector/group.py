@@ -2,10 +2,12 @@
 
 The same class runs inside every Ray worker and inside SerialVectorEnv, so the
 two give identical numbers. It mirrors ``gymnasium.vector.SyncVectorEnv`` step
-for step and adds one thing: an environment whose step or reset raises is
-rebuilt, reseeded with a fresh deterministic seed, and reported as truncated
-with ``info["worker_restarted"] = True`` and the traceback in
-``info["worker_error"]``.
+for step and adds what ``env_errors`` asks of an env whose code raises
+(:mod:`chronogym.vector.env_errors`): with ``"raise"`` (the default) the call
+answers with an :class:`~chronogym.vector.env_errors.EnvRaised` that the driver
+re-raises; with ``"restart"`` the env is rebuilt, reseeded with a fresh
+deterministic seed, and reported as truncated with
+``info["worker_restarted"] = True`` and the traceback in ``info["worker_error"]``.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import chronogym  # noqa: F401  (registers the chronogym/... ids that resolve_en
 from chronogym.errors import DisabledAutoresetError
 from chronogym.seeding import restart_seed
 from chronogym.vector.backend import EnvFactory, ResetAnswer, Restart, StepAnswer
+from chronogym.vector.env_errors import EnvRaised, check_env_errors, env_label
 from chronogym.vector.infos import to_columns
 
 
@@ -38,6 +41,7 @@ def locked(method: Callable[..., Any]) -> Callable[..., Any]:
     @functools.wraps(method)
     def run(self: EnvGroup, *args: Any, **kwargs: Any) -> Any:
         with self._lock:
+            self.check_built()
             return method(self, *args, **kwargs)
 
     return run
@@ -84,6 +88,7 @@ class EnvGroup:
         seed_roots: Sequence[int],
         restart_counts: Sequence[int] | None = None,
         env_kwargs: dict[str, Any] | None = None,
+        env_errors: str = "raise",
     ) -> None:
         if len(env_fns) != len(indices):
             raise ValueError(f"{len(env_fns)} env factories for {len(indices)} env indices")
@@ -91,10 +96,22 @@ class EnvGroup:
         self.env_kwargs = env_kwargs
         self.indices = list(indices)
         self.autoreset_mode = AutoresetMode(autoreset_mode)
-        self.envs = [build_env(fn, env_kwargs) for fn in self.env_fns]
-        n = len(self.envs)
-        self.single_observation_space = self.envs[0].observation_space
-        self.single_action_space = self.envs[0].action_space
+        self.env_errors = check_env_errors(env_errors)
+        self.labels = [env_label(fn) for fn in self.env_fns]
+        # an env that fails to build is reported by the first call (the actor stays alive, so
+        # the driver gets the env's own exception rather than a dead worker)
+        self.build_error: EnvRaised | None = None
+        self.envs = []
+        for j, fn in enumerate(self.env_fns):
+            try:
+                self.envs.append(build_env(fn, env_kwargs))
+            except Exception as error:
+                self.build_error = EnvRaised.capture(error, self.indices[j], "make", self.labels[j])
+                break
+        n = len(self.env_fns)
+        if self.build_error is None:
+            self.single_observation_space = self.envs[0].observation_space
+            self.single_action_space = self.envs[0].action_space
         self.seed_roots = list(seed_roots)
         self.restart_counts = list(restart_counts) if restart_counts else [0] * n
         self.pending_seeds: list[int | None] = [None] * n
@@ -102,9 +119,19 @@ class EnvGroup:
         self.last_obs: list[Any] = [None] * n
         self._lock = threading.RLock()  # see locked(): a socket thread may serve steps
 
+    def check_built(self) -> None:
+        """Raise the construction error of an env that failed to build."""
+        if self.build_error is not None:
+            raise self.build_error
+
+    def raised(self, error: BaseException, j: int, method: str, crash_loop=False) -> EnvRaised:
+        """Env ``j``'s ``error``, to send to the driver."""
+        return EnvRaised.capture(error, self.indices[j], method, self.labels[j], crash_loop)
+
     # -- introspection -----------------------------------------------------------------
     def spaces(self) -> tuple[gym.Space, gym.Space, dict[str, Any], str | None]:
         """Spaces, metadata and render mode, checked to be the same for every env here."""
+        self.check_built()
         env = self.envs[0]
         for index, other in zip(self.indices, self.envs, strict=True):
             if (other.observation_space, other.action_space) != (
@@ -150,9 +177,15 @@ class EnvGroup:
 
     # -- reset / step ------------------------------------------------------------------
     def _batch(self, items: list[Any]) -> Any:
-        """Observations of every env here as one batch (as ``SyncVectorEnv`` joins them)."""
-        out = create_empty_array(self.single_observation_space, n=len(items), fn=np.zeros)
-        return concatenate(self.single_observation_space, items, out)
+        """Observations of every env here as one batch (as ``SyncVectorEnv`` joins them); one
+        that does not fit is its env's error, sent to the driver."""
+        space = self.single_observation_space
+        out = create_empty_array(space, n=len(items), fn=np.zeros)
+        try:
+            return concatenate(space, items, out)
+        except Exception as error:
+            j, why = _misfit(space, items, error)
+            raise self.raised(why, j, "step") from None
 
     def _reset_one(self, j: int, seed: int | None, options: dict[str, Any] | None):
         """Reset env j; a user seed becomes its restart-seed root, a pending restart seed not."""
@@ -187,10 +220,11 @@ class EnvGroup:
             self.autoreset[j] = False
             try:
                 obs, info = self._reset_one(j, seeds[j], options)
-            except Exception:
+            except Exception as error:
+                if self.env_errors == "raise":
+                    raise self.raised(error, j, "reset") from None
                 restarts.append(Restart(self.indices[j], traceback.format_exc()))
-                self._rebuild(j)
-                obs, info = self._reset_one(j, seeds[j], options)
+                obs, info = self._again_after_rebuild(j, "reset", seeds[j], options)
             self.last_obs[j] = obs
             infos[j] = info
         return ResetAnswer(list(self.last_obs), infos, restarts)
@@ -228,7 +262,9 @@ class EnvGroup:
                         info = {**final, **reset_info}
             except DisabledAutoresetError:
                 raise
-            except Exception:
+            except Exception as raised:
+                if self.env_errors == "raise":
+                    raise self.raised(raised, j, "step") from None
                 error = traceback.format_exc()
                 restarts.append(Restart(self.indices[j], error))
                 obs, info = self._restart_in_step(j)
@@ -274,31 +310,68 @@ class EnvGroup:
 
     def _restart_in_step(self, j: int) -> tuple[Any, dict[str, Any]]:
         final_obs = self.last_obs[j]
-        seed = self._rebuild(j)
-        self.pending_seeds[j] = seed
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
-            obs, reset_info = self._reset_one(j, None, None)
+            obs, reset_info = self._again_after_rebuild(j, "reset", None, None)
             return obs, {"final_obs": final_obs, "final_info": {}, **reset_info}
+        self._rebuilt(j, "make")
         return final_obs, {}
+
+    def _rebuilt(self, j: int, method: str) -> None:
+        """Rebuild env ``j`` (its next reset takes a fresh seed); a failure is a crash loop."""
+        try:
+            self.pending_seeds[j] = self._rebuild(j)
+        except Exception as error:
+            raise self.raised(error, j, method, crash_loop=True) from None
+
+    def _again_after_rebuild(self, j: int, method: str, seed: int | None, options: Any):
+        """Rebuild env ``j`` and reset it (with ``seed``, else its fresh restart seed); a
+        failure right after the rebuild is a crash loop, reported as such."""
+        self._rebuilt(j, "make")
+        try:
+            return self._reset_one(j, seed, options)
+        except Exception as error:
+            raise self.raised(error, j, method, crash_loop=True) from None
 
     # -- generic access ----------------------------------------------------------------
     @locked
     def call(self, name: str, args: tuple[Any, ...], kwargs: dict[str, Any]) -> list[Any]:
+        """``name`` called (or read) on every env; an env's exception goes to the driver."""
         results = []
-        for env in self.envs:
-            attr = env.get_wrapper_attr(name)
-            results.append(attr(*args, **kwargs) if callable(attr) else attr)
+        for j, env in enumerate(self.envs):
+            try:
+                attr = env.get_wrapper_attr(name)
+                results.append(attr(*args, **kwargs) if callable(attr) else attr)
+            except Exception as error:
+                raise self.raised(error, j, name) from None
         return results
 
     @locked
     def set_attr(self, name: str, values: Sequence[Any]) -> None:
-        for env, value in zip(self.envs, values, strict=True):
-            env.set_wrapper_attr(name, value)
+        for j, (env, value) in enumerate(zip(self.envs, values, strict=True)):
+            try:
+                env.set_wrapper_attr(name, value)
+            except Exception as error:
+                raise self.raised(error, j, f"set_attr {name!r}") from None
 
-    @locked
     def close(self) -> None:
-        for env in self.envs:
-            env.close()
+        """Close the envs that were built (also after a construction error)."""
+        with self._lock:
+            for env in self.envs:
+                env.close()
+
+
+def _misfit(space: gym.Space, items: list[Any], error: Exception) -> tuple[int, Exception]:
+    """The first env whose observation does not fit ``space``, and why (for Box spaces;
+    otherwise env 0 of the group and numpy's own error)."""
+    shape = getattr(space, "shape", None)
+    if isinstance(space, gym.spaces.Box):
+        for j, item in enumerate(items):
+            if np.shape(item) != shape:
+                return j, ValueError(
+                    f"the observation has shape {np.shape(item)}; expected {shape}, the shape "
+                    f"of its observation_space {space}"
+                )
+    return 0, error
 
 
 def _as_array(values: list[Any], dtype: type) -> np.ndarray:

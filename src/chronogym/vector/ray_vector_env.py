@@ -72,8 +72,21 @@ class RayVectorEnv(WorkerVectorEnv):
             workers go to as many nodes as possible).
         autoreset_mode: Gymnasium's ``AutoresetMode`` (NEXT_STEP default).
         max_restarts: restarts allowed per env before WorkerCrashLoopError
-            (-1: no limit).
+            (-1: no limit): a worker process lost, or (``env_errors="restart"``)
+            an env's exception, each count one.
         invalid_action: ``"raise"`` (default) or ``"clip"`` for NaN/Inf actions.
+        env_errors: what a Python exception raised by an env's own code
+            (construction, ``reset``, ``step``, ``call``, ``render``) does.
+            ``"raise"`` (default, as Gymnasium's vector envs): it is raised
+            here, from the call that met it, as its own class (or
+            ``WorkerEnvError`` where it does not pickle), naming the env
+            index and id, with the worker's traceback chained; the call's
+            results are lost, so the next ``step`` needs a ``reset()``.
+            ``"restart"`` (long unattended runs): the env is rebuilt,
+            reseeded and reported truncated with ``info["worker_error"]``, up
+            to ``max_restarts`` times; one that fails again right after its
+            rebuild ends the run with ``WorkerCrashLoopError``. A worker
+            process that dies is replaced either way.
         step_timeout: seconds a worker may take for one call before it is
             treated as lost and replaced (default: wait forever).
         start_timeout: seconds the workers may take to start and build their
@@ -148,6 +161,7 @@ class RayVectorEnv(WorkerVectorEnv):
         step_timeout: float | None = None,
         start_timeout: float = 120.0,
         env_kwargs: dict[str, Any] | None = None,
+        env_errors: str = "raise",
         transport: str | None = None,
         spin_us: float | None = None,
         driver_worker: bool = False,
@@ -196,4 +210,5 @@ class RayVectorEnv(WorkerVectorEnv):
             max_restarts=max_restarts,
             invalid_action=invalid_action,
             env_kwargs=env_kwargs,
+            env_errors=env_errors,
         )

@@ -3,9 +3,13 @@
 The driver splits the batched action into one slice per worker, issues every
 worker's call, then waits once (one barrier per vector step) and joins the
 results. Each worker is an :class:`~chronogym.vector.group.EnvGroup` holding
-``envs_per_worker`` environments. A worker that dies (or whose call fails) is
-replaced: its environments are rebuilt, get fresh deterministic seeds, and are
-reported as truncated with ``info["worker_restarted"] = True``.
+``envs_per_worker`` environments. A worker that dies (a fault: a signal, ``os._exit``,
+a lost node, ``step_timeout``) is replaced: its environments are rebuilt, get fresh
+deterministic seeds, and are reported as truncated with ``info["worker_restarted"] = True``.
+An env's own Python exception is raised here, in the driver, or restarts the env, as
+``env_errors`` says (:mod:`chronogym.vector.env_errors`). After an env raised in
+``reset``, ``step`` or ``recv``, the results of that call are lost, so the vector env
+asks for a full ``reset()`` before the next step (``gymnasium.error.ResetNeeded``).
 
 Besides that barrier, ``send`` / ``recv`` step subsets of whole workers without
 one (EnvPool-style), and ``step_async`` / ``step_wait`` split a full step the
@@ -26,7 +30,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.error import NoAsyncCallError
+from gymnasium.error import NoAsyncCallError, ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
@@ -56,6 +60,13 @@ from chronogym.vector.checks import (
     check_reset_mask,
     normalize_env_fns,
     workers_of,
+)
+from chronogym.vector.env_errors import (
+    CRASH_LOOP_TAIL,
+    EnvErrorSeen,
+    EnvRaised,
+    check_env_errors,
+    driver_error,
 )
 from chronogym.vector.group import resolve_env_id
 from chronogym.vector.in_flight import CallKind, InFlight, PendingCall
@@ -93,6 +104,7 @@ class WorkerVectorEnv(VectorEnv):
         max_restarts: int = 3,
         invalid_action: str = "raise",
         env_kwargs: dict[str, Any] | None = None,
+        env_errors: str = "raise",
     ) -> None:
         fns = normalize_env_fns(env_fns, num_envs)
         self.num_envs = len(fns)
@@ -101,6 +113,8 @@ class WorkerVectorEnv(VectorEnv):
         check_invalid_action_mode(invalid_action)
         self.max_restarts = check_max_restarts(max_restarts)
         self.invalid_action = invalid_action
+        self.env_errors = check_env_errors(env_errors)
+        self._reset_needed = ""  # why a full reset() must come before the next step
         self.closed = False
         self._backend = backend
         m = self.envs_per_worker
@@ -114,7 +128,12 @@ class WorkerVectorEnv(VectorEnv):
         self._started = False
         backend.start([self._group_kwargs(w) for w in range(self.num_workers)])
         self._started = True
-        obs_space, act_space, metadata, render_mode = self._check_spaces()
+        try:
+            obs_space, act_space, metadata, render_mode = self._check_spaces()
+        except BaseException:  # an env failed to build: stop the workers, raise its error
+            self._started, self.closed = False, True
+            backend.shutdown()
+            raise
         self.single_observation_space = obs_space
         self.single_action_space = act_space
         self.observation_space = batch_space(obs_space, self.num_envs)
@@ -137,12 +156,19 @@ class WorkerVectorEnv(VectorEnv):
             "seed_roots": self._seed_roots[lo:hi],
             "restart_counts": self._restart_counts[lo:hi],
             "env_kwargs": self._env_kwargs,
+            "env_errors": self.env_errors,
         }
 
     def _check_spaces(self) -> tuple[Any, Any, dict[str, Any], str | None]:
         """Spaces of worker 0, after checking that every worker reports the same."""
         workers = list(range(self.num_workers))
         outcomes = self._call_all(workers, "spaces", [()] * self.num_workers)
+        seen = EnvErrorSeen()
+        for w, outcome in enumerate(outcomes):
+            if isinstance(outcome.value, EnvRaised):
+                seen.keep(outcome.value, w)
+        if (error := seen.to_raise()) is not None:
+            raise error from error.__cause__
         for w, outcome in enumerate(outcomes):
             if not outcome.ok:
                 raise WorkerCallError(f"worker {w} failed to report its spaces:\n{outcome.error}")
@@ -157,6 +183,11 @@ class WorkerVectorEnv(VectorEnv):
 
     def _call_one(self, w: int, method: str, *args: Any) -> Any:
         (outcome,) = self._backend.gather([w], [self._backend.submit(w, method, *args)])
+        if isinstance(outcome.value, EnvRaised):
+            if method in ("reset_restarted", "mark_restarted"):
+                self._reset_needed = f"env {outcome.value.env_index} raised in reset()"
+            error = driver_error(outcome.value, w)
+            raise error from error.__cause__
         if not outcome.ok:
             raise WorkerCallError(f"worker {w} failed in {method}():\n{outcome.error}")
         return outcome.value
@@ -207,12 +238,14 @@ class WorkerVectorEnv(VectorEnv):
         self._check_open()
         self._check_idle("reset")
         seeds, options, mask = self._prepare_reset(seed, options)
+        if mask is not None:
+            self._check_reset_needed("reset(options={'reset_mask': ...})")
         self._check_first_reset(mask)
         workers = [
             w for w, (lo, hi) in enumerate(self._slices) if mask is None or mask[lo:hi].any()
         ]
         infos_per_env: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        pending = workers
+        pending, replaced, seen = workers, set(), EnvErrorSeen()
         while pending:
             args = [self._reset_args(w, seeds, options, mask) for w in pending]
             outcomes = self._call_all(pending, "reset", args)
@@ -221,11 +254,45 @@ class WorkerVectorEnv(VectorEnv):
                 if outcome.ok:
                     lo, hi = self._slices[w]
                     infos_per_env[lo:hi] = self._take_reset(w, outcome.value)
+                elif isinstance(outcome.value, EnvRaised):
+                    seen.keep(outcome.value, w)
                 else:
+                    if w in replaced:
+                        self._raise_lost_again(w, "reset", outcome.error)
+                    replaced.add(w)
                     self._replace_worker(w, outcome.error)
                     failed.append(w)
             pending = failed
+        if (error := self._env_error(seen)) is not None:
+            raise error from error.__cause__
+        self._reset_needed = ""
         return self._join_obs(), self._join_infos(infos_per_env)
+
+    def _env_error(self, seen: EnvErrorSeen) -> BaseException | None:
+        """The env's exception to raise, if one came (raised by the public method itself, so
+        the traceback stays short); the call's results are then lost, so the next step
+        needs a full reset first."""
+        if seen.error is not None:
+            self._reset_needed = f"env {seen.error.env_index} raised in {seen.error.method}()"
+        return seen.to_raise()
+
+    def _check_reset_needed(self, what: str) -> None:
+        if self._reset_needed:
+            raise ResetNeeded(
+                f"{what} after {self._reset_needed}: the envs' states after an env's error are "
+                "not defined (the call's results were lost); expected reset() of every env "
+                "(no reset_mask) first"
+            )
+
+    def _raise_lost_again(self, w: int, method: str, error: str) -> None:
+        """A worker lost again right after its replacement, in the same call: a crash loop."""
+        lo, hi = self._slices[w]
+        tail = "\n".join(error.rstrip().splitlines()[-CRASH_LOOP_TAIL:])
+        raise WorkerCrashLoopError(
+            f"worker {w} (envs {lo}..{hi - 1}) was lost again in {method}() right after it was "
+            f"replaced: a crash loop, so it is not replaced again. The last error:\n{tail}",
+            error,
+        )
 
     def _check_first_reset(self, mask: np.ndarray | None) -> None:
         """A masked reset needs every env it leaves alone to have been reset before."""
@@ -276,13 +343,30 @@ class WorkerVectorEnv(VectorEnv):
         self._check_idle("step")
         if self._last_parts[0] is None:
             raise RuntimeError("step() called before reset(); call reset() first")
+        self._check_reset_needed("step()")
         if self.profile is not None:
             return self._step_profiled(actions, self.profile)
         workers = list(range(self.num_workers))
         args = self._step_args(workers, actions)
         outcomes = self._call_all(workers, self._step_method, args)
-        results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
-        return self._join_results(workers, results)
+        parts, seen = self._step_parts(workers, outcomes)
+        if (error := self._env_error(seen)) is not None:
+            raise error from error.__cause__
+        return self._join_results(workers, parts)
+
+    def _step_parts(
+        self, workers: list[int], outcomes: list[Outcome]
+    ) -> tuple[list[StepPart], EnvErrorSeen]:
+        """Each worker's part of a step, and the first env exception (raised by the caller
+        once every answer is read)."""
+        seen = EnvErrorSeen()
+        parts = []
+        for w, outcome in zip(workers, outcomes, strict=True):
+            if isinstance(outcome.value, EnvRaised):
+                seen.keep(outcome.value, w)
+            else:
+                parts.append(self._step_result(w, outcome))
+        return parts, seen
 
     def profile_steps(self, enabled: bool = True) -> StepProfile | None:
         """Time every following ``step`` phase by phase (``enabled=False``: stop).
@@ -305,8 +389,10 @@ class WorkerVectorEnv(VectorEnv):
         marks.append(now())
         outcomes = self._backend.gather(workers, handles)
         marks.append(now())
-        results = [self._step_result(w, o) for w, o in zip(workers, outcomes, strict=True)]
-        out = self._join_results(workers, results)
+        parts, seen = self._step_parts(workers, outcomes)
+        if (error := self._env_error(seen)) is not None:
+            raise error from error.__cause__
+        out = self._join_results(workers, parts)
         marks.append(now())
         answers = [StepAnswer.of(o.value) for o in outcomes if o.ok]
         timed = [a.timings for a in answers if a.timings is not None]
@@ -423,6 +509,7 @@ class WorkerVectorEnv(VectorEnv):
         them may be in flight already. Results come back through :meth:`recv`.
         """
         self._check_open()
+        self._check_reset_needed("send()")
         ids = check_env_ids(env_ids, self.num_envs)
         workers = workers_of(ids, self._slices, self.envs_per_worker)
         busy = [w for w in workers if w in self._in_flight]
@@ -501,7 +588,16 @@ class WorkerVectorEnv(VectorEnv):
         need = check_min_envs(min_envs, len(self.envs_in_flight))
         answers = self._in_flight.collect(need, timeout)
         workers = sorted(answers)
-        results = [self._pending_result(w, *answers[w]) for w in workers]
+        seen = EnvErrorSeen()
+        results = []
+        for w in workers:
+            call, outcome = answers[w]
+            if isinstance(outcome.value, EnvRaised):
+                seen.keep(outcome.value, w)
+            else:
+                results.append(self._pending_result(w, call, outcome))
+        if (error := self._env_error(seen)) is not None:
+            raise error from error.__cause__
         env_ids = np.concatenate([np.arange(*self._slices[w], dtype=np.int64) for w in workers])
         return (*self._join_results(workers, results), env_ids)
 
@@ -509,8 +605,15 @@ class WorkerVectorEnv(VectorEnv):
         """A step's or a reset's part; a failed reset is redone on a replacement worker."""
         if call.kind is CallKind.STEP:
             return self._step_result(w, outcome)
+        replaced = False
         while not outcome.ok:
+            if isinstance(outcome.value, EnvRaised):
+                error = self._env_error(EnvErrorSeen(outcome.value, w))
+                raise error from error.__cause__  # type: ignore[misc]
+            if replaced:
+                self._raise_lost_again(w, "async_reset", outcome.error)
             self._replace_worker(w, outcome.error)
+            replaced = True
             (outcome,) = self._call_all([w], "reset", [call.args])
         infos = self._take_reset(w, outcome.value)
         count = len(infos)
@@ -567,6 +670,9 @@ class WorkerVectorEnv(VectorEnv):
     def _unwrap(self, w: int, outcome: Outcome, name: str) -> Any:
         if outcome.ok:
             return outcome.value
+        if isinstance(outcome.value, EnvRaised):
+            error = driver_error(outcome.value, w)
+            raise error from error.__cause__
         if outcome.lost:
             self._replace_worker(w, outcome.error)
             lo, hi = self._slices[w]
