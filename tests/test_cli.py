@@ -32,3 +32,17 @@ def test_bad_steps_is_rejected():
     result = run_cli("demo", "--steps", "0")
     assert result.returncode != 0
     assert "--steps=0: expected an integer >= 1" in result.stderr
+
+
+def test_optimize_summary_quotes_the_newest_failed_trials_reason():
+    import optuna
+
+    from chronogym.cli import last_fail_reason
+
+    study = optuna.create_study(storage=optuna.storages.InMemoryStorage())
+    assert last_fail_reason(study) == "none recorded"
+    for reason in ("old", "Traceback (most recent call last):\n  File x\nZeroDivisionError: boom"):
+        trial = study.ask()
+        trial.set_user_attr("fail_reason", reason)
+        study.tell(trial, state=optuna.trial.TrialState.FAIL)
+    assert last_fail_reason(study, lines=2).split() == ["File", "x", "ZeroDivisionError:", "boom"]

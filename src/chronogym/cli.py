@@ -152,7 +152,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_optimize(args: argparse.Namespace) -> int:
-    """Optimize the lander's absorbers with Optuna TPE, trials on parallel Ray workers."""
+    """Optimize the lander's absorbers with Optuna TPE, trials on parallel Ray workers.
+
+    A study runs unattended, so an evaluation that raises is recorded as a FAIL trial (its
+    traceback in the trial's ``fail_reason``) and the study goes on; a worker that dies is
+    replaced and its trial retried. The summary counts the failed trials and quotes the end
+    of the newest one's reason."""
     import optuna  # the optim extra
 
     if args.backend == "serial" and args.workers != 1:
@@ -202,6 +207,8 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         f"{report.retried} retried, {report.recovered} recovered from a stopped run "
         f"in {report.elapsed:.1f} s"
     )
+    if report.failed:  # an evaluation that raised is a FAIL trial and the study goes on
+        print(f"  a failed trial's reason (user attribute fail_reason): {last_fail_reason(study)}")
     if report.best_value is None:
         print("  no completed trial yet")
         return 1
@@ -223,6 +230,13 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         )
     print(f"  inspect the study: optuna-dashboard {args.storage}")
     return 0
+
+
+def last_fail_reason(study: Any, lines: int = 3) -> str:
+    """The end of the newest FAIL trial's ``fail_reason``: its last ``lines`` lines."""
+    failed = [t for t in study.trials if t.state.name == "FAIL"]
+    reason = failed[-1].user_attrs.get("fail_reason", "") if failed else ""
+    return "\n    ".join(["", *str(reason).strip().splitlines()[-lines:]]) or "none recorded"
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -265,6 +279,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         engine=args.engine,
         driver_worker=args.driver_worker,
         eval_episodes=args.eval_episodes,
+        env_errors=args.env_errors,
     )
     row = result.last_row
     print(

@@ -266,6 +266,14 @@ def add_train(sub: Any) -> None:
         None,
         "torch threads of the synchronous update (default: this machine's CPUs, at most 8)",
     )
+    tr.add_argument(
+        "--env-errors",
+        choices=("restart", "raise"),
+        default="restart",
+        help="what an env's Python exception does: 'restart' (default, for long unattended "
+        "runs) rebuilds the env and truncates its episode, and stops the run if it fails again "
+        "right after the rebuild; 'raise' stops at the first, to debug a task",
+    )
     add_int(
         tr,
         "--eval-episodes",

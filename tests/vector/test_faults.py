@@ -43,6 +43,7 @@ def test_sigkilled_worker_is_replaced(ray_cluster, mode):
     assert (rewards[2:] == 0).all()
     assert info["worker_restarted"][2:].all() and not info["_worker_restarted"][:2].any()
     assert "ActorDiedError" in info["worker_error"][2]
+    assert "died without recording a signal" in info["worker_error"][2]  # SIGKILL leaves none
     if mode == "SameStep":
         # the last observation before the crash is the episode's final observation
         np.testing.assert_array_equal(info["final_obs"][2], run[KILL_AT][0][2])
@@ -56,6 +57,23 @@ def test_sigkilled_worker_is_replaced(ray_cluster, mode):
     assert np.isfinite(run[-1][0]).all()
     assert [i for i, _ in vec.restarts] == [2, 3]
     vec.close()
+
+
+@pytest.mark.parametrize("transport", ["socket", "actor"])
+def test_a_segfaulted_worker_is_replaced_and_the_signal_named(ray_cluster, transport):
+    vec = RayVectorEnv(ENV_ID, 2, envs_per_worker=1, transport=transport)
+    try:
+        vec.reset(seed=0)
+        actions = np.zeros((2, 1), dtype=np.float32)
+        vec.step(actions)
+        os.kill(vec.worker_pids()[1], signal.SIGSEGV)
+        time.sleep(0.3)
+        _, _, _, truncated, info = vec.step(actions)
+        assert truncated.tolist() == [False, True]
+        assert "died of SIGSEGV, as its Ray log records" in info["worker_error"][1]
+        vec.step(actions)  # the run goes on
+    finally:
+        vec.close()
 
 
 def test_restart_seeds_are_fresh_and_deterministic(ray_cluster):

@@ -16,6 +16,7 @@ from chronogym.ray_runtime import actor_scheduling, quiet_mujoco_warnings, start
 from chronogym.vector.backend import Outcome, error_outcome
 from chronogym.vector.env_errors import EnvRaised
 from chronogym.vector.group import EnvGroup
+from chronogym.vector.worker_death import describe_death
 
 
 class ActorGroup(EnvGroup):
@@ -128,7 +129,8 @@ class ActorBackend:
                 message = f"no answer within step_timeout={self.step_timeout} s"
                 outcomes.append(Outcome(False, None, message, lost=True))
             except ray.exceptions.RayError as error:
-                outcomes.append(Outcome(False, error, f"{type(error).__name__}: {error}", True))
+                text = describe_death(f"{type(error).__name__}: {error}")
+                outcomes.append(Outcome(False, error, text, True))
             except Exception as error:
                 outcomes.append(Outcome(False, error, traceback.format_exc(), lost=True))
         return outcomes

@@ -22,6 +22,7 @@ from chronogym.vector.actor_transport import ActorBackend
 from chronogym.vector.backend import Backend, EnvFactory
 from chronogym.vector.checks import normalize_env_fns
 from chronogym.vector.driver_worker import DriverWorkerBackend
+from chronogym.vector.env_errors import check_env_errors
 from chronogym.vector.socket_transport import SocketBackend, check_spin_us
 from chronogym.vector.worker_vector_env import WorkerVectorEnv
 
@@ -183,6 +184,7 @@ class RayVectorEnv(WorkerVectorEnv):
         if step_timeout is not None:
             check_number("step_timeout", step_timeout, low=1e-9, expected="None or seconds > 0")
         actor_scheduling(scheduling)  # validate before starting Ray
+        check_env_errors(env_errors)
         ensure_ray(address, worker_niceness)
         if envs_per_worker is None:
             cpus = max(1, int(cluster_cpus()))

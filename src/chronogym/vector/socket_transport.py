@@ -56,6 +56,7 @@ from chronogym.vector.wire_format import (
     encode_answer,
     fill,
 )
+from chronogym.vector.worker_death import describe_death
 
 STEP_METHOD = "step_packed"  # the driver's step method this backend sends over sockets
 ACCEPT_TIMEOUT_S = 30.0  # a worker stops listening if the driver never connects
@@ -316,7 +317,7 @@ class SocketBackend(ActorBackend):
         try:
             self._ray.get(self.actors[w].ready.remote(), timeout=DEATH_PROBE_S)
         except Exception as error:
-            return f"{type(error).__name__}: {error}"
+            return describe_death(f"{type(error).__name__}: {error}")
         return "the worker's process is alive but its socket thread stopped"
 
     def _resolve(self, handle: SockHandle) -> Outcome:

@@ -20,6 +20,7 @@ from chronogym.rl.config import FINETUNE_PPO, _merge, ppo_train_config
 from chronogym.tasks.quadruped.engines import ENV_IDS, check_engine, env_kwargs_for
 from chronogym.tasks.quadruped.evaluation import WalkingCriterion, WalkingEvaluator
 from chronogym.validation import check_bool, check_int
+from chronogym.vector.env_errors import check_env_errors
 from chronogym.vector.factory import make_vec
 
 #: The vector backends the Go1 trains on: Ray workers, or all envs in this process.
@@ -120,6 +121,7 @@ def train_quadruped(
     engine: str = "mujoco",
     driver_worker: bool = False,
     eval_episodes: int = 2,
+    env_errors: str = "restart",
 ) -> Any:
     """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
 
@@ -133,6 +135,13 @@ def train_quadruped(
     (``chronogym/ChronoGo1Velocity-v0``; a MuJoCo checkpoint resumes there unchanged).
     ``driver_worker`` (Ray only): the training process steps one worker's envs itself
     (``RayVectorEnv(driver_worker=True)``).
+
+    ``env_errors``: what an env's Python exception does during training (see
+    :class:`~chronogym.RayVectorEnv`). A training runs unattended for hours, so the default is
+    ``"restart"``: the env is rebuilt and its episode truncated (``info["worker_error"]``
+    holds the traceback, at most ``max_restarts=3`` times per env), and an env that fails
+    again right after its rebuild (a bug at reset) stops the run at once. ``"raise"`` stops
+    at the first exception, for debugging a task.
 
     ``eval_episodes``: at every save point the checkpoint is scored on the walking criterion
     of ``chronogym play`` (:class:`~chronogym.tasks.quadruped.evaluation.WalkingCriterion`'s
@@ -151,6 +160,7 @@ def train_quadruped(
     check_engine(engine, terrain)
     check_bool("driver_worker", driver_worker)
     check_int("eval_episodes", eval_episodes, low=0)
+    check_env_errors(env_errors)
     if driver_worker and backend != "ray":
         raise ValueError(f"driver_worker=True with backend={backend!r}: expected backend='ray'")
     if resume is not None and not Path(resume).is_file():
@@ -169,6 +179,7 @@ def train_quadruped(
         address=address,
         task_kwargs=task_kwargs,
         engine=engine,
+        env_errors=env_errors,
         **({"driver_worker": True} if driver_worker else {}),
     )
     env = RslRlVecEnv(vec, seed=seed)
