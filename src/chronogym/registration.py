@@ -153,3 +153,6 @@ def register_envs() -> None:
     """Register every task shipped with chronogym (idempotent)."""
     for name, path in {**TASKS, **OPTIONAL_TASKS}.items():
         register_task(f"{NAMESPACE}/{name}", path)
+    from chronogym.vector.driver_registry import note_import_ids
+
+    note_import_ids()  # what a worker has too: the ids registered later are the script's

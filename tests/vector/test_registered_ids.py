@@ -26,6 +26,11 @@ SCRIPT = DRIFT_TASK + textwrap.dedent(
     sync_run = rollout(gym.make_vec("me/Drift-v0", 4, vectorization_mode="sync"))
     assert np.array_equal(ray_run, sync_run), (ray_run, sync_run)
     print("same numbers", ray_run.shape)
+    # factories that make the script's id inside the worker (as CleanRL's make_env does)
+    fns = [lambda: gym.make("me/Drift-v0") for _ in range(4)]
+    factory_run = rollout(chronogym.RayVectorEnv(fns, envs_per_worker=2))
+    assert np.array_equal(factory_run, sync_run), (factory_run, sync_run)
+    print("factories too")
     """
 )
 
@@ -34,6 +39,7 @@ def test_id_registered_in_the_users_script_runs_on_workers(tmp_path):
     done = run_user_script(tmp_path, SCRIPT)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "same numbers (21, 4, 1)" in done.stdout
+    assert "factories too" in done.stdout
 
 
 @pytest.fixture

@@ -3,8 +3,9 @@
 A Gymnasium vector env's ``call`` and ``set_attr`` reach every env. Each env built by
 ``make_sb3_vec_env``, ``RayVecEnv`` or ``SerialVecEnv`` is wrapped in :class:`IndexedEnv`,
 which knows its own index, so one ``call`` to every env can act on the chosen ones only.
-:class:`DriverRegistry` carries the driver's Gymnasium ids to the workers, for factories
-that call ``gymnasium.make`` with an id registered in the user's script.
+:class:`~chronogym.vector.driver_registry.DriverRegistry` carries the driver's Gymnasium ids
+to the workers, for factories that call ``gymnasium.make`` with an id registered in the
+user's script.
 Ray workers import this module to rebuild the envs, so it must stay free of
 Stable-Baselines3 and torch.
 """
@@ -12,7 +13,6 @@ Stable-Baselines3 and torch.
 from __future__ import annotations
 
 import os
-import pickle
 from collections.abc import Callable
 from typing import Any
 
@@ -20,6 +20,7 @@ import gymnasium as gym
 from gymnasium.envs.registration import EnvSpec
 
 import chronogym  # noqa: F401  (registers the chronogym/... ids in this process)
+from chronogym.vector.driver_registry import DriverRegistry, make_with_driver_ids
 
 INDEX_ATTR = "chronogym_env_index"
 HOOK = "chronogym_sb3_op"
@@ -71,43 +72,6 @@ class IndexedEnv(gym.Wrapper):
         return os.getpid(), id(self.unwrapped)  # "identity"
 
 
-class DriverRegistry:
-    """The driver's Gymnasium registry, each spec pickled apart, for the workers.
-
-    A factory such as SB3's ``make_vec_env`` closure calls ``gymnasium.make(env_id)`` in the
-    worker, where an id registered by the user's script does not exist. When a factory
-    fails with ``gymnasium.error.UnregisteredEnv``, :meth:`register_missing` registers the
-    driver's specs that this process lacks, and the factory runs again. Each spec is
-    unpickled only then, so a spec whose code a worker cannot import harms no other id.
-    """
-
-    def __init__(self, dumps: Callable[[Any], bytes]) -> None:
-        self.specs: dict[str, bytes] = {}
-        for env_id, spec in list(gym.registry.items()):
-            try:
-                self.specs[env_id] = dumps(spec)
-            except Exception:  # an unpicklable spec: the workers go without that id
-                continue
-
-    def register_missing(self) -> tuple[list[str], dict[str, str]]:
-        """Register the specs this process lacks: the ids registered, and the ids whose
-        spec could not be loaded here (its code does not import), with the error."""
-        added, failed = [], {}
-        for env_id, data in self.specs.items():
-            if env_id in gym.registry:
-                continue
-            try:
-                # the driver's own bytes, as trusted as every Ray argument it sends
-                spec = pickle.loads(data)  # trusted: own worker's driver
-            except Exception as error:  # its code does not import here: leave that id out
-                failed[env_id] = f"{type(error).__name__}: {error}"
-                continue
-            if isinstance(spec, EnvSpec):
-                gym.registry[env_id] = spec
-                added.append(env_id)
-        return added, failed
-
-
 def make_indexed_env(
     env_id: str | EnvSpec, index: int, env_kwargs: dict[str, Any] | None
 ) -> IndexedEnv:
@@ -127,26 +91,7 @@ def build_indexed_env(
     With ``registry``: a factory that fails on an id this process has not registered runs
     again, once, after the driver's missing ids are registered here.
     """
-    try:
-        env = env_fn()
-    except gym.error.UnregisteredEnv as error:
-        if registry is None:
-            raise
-        added, failed = registry.register_missing()
-        if failed:
-            error = type(error)(
-                f"{error} (in worker pid {os.getpid()}: the driver's specs of {sorted(failed)} "
-                f"could not be loaded here: {'; '.join(failed.values())}; make the env's "
-                "module importable on every worker, or define the env in the script)"
-            )
-        if not added:
-            raise error
-        try:
-            env = env_fn()
-        except gym.error.UnregisteredEnv:
-            if not failed:
-                raise
-            raise error from None
+    env = make_with_driver_ids(env_fn, registry)
     if not isinstance(env, gym.Env):
         raise TypeError(
             f"env_fns[{index}]={env_fn!r} returned {env!r} (a {type(env).__name__}); "

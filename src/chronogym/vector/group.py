@@ -31,6 +31,7 @@ import chronogym  # noqa: F401  (registers the chronogym/... ids that resolve_en
 from chronogym.errors import DisabledAutoresetError
 from chronogym.seeding import restart_seed
 from chronogym.vector.backend import EnvFactory, ResetAnswer, Restart, StepAnswer
+from chronogym.vector.driver_registry import DriverRegistry, make_with_driver_ids
 from chronogym.vector.env_errors import EnvRaised, check_env_errors, env_label
 from chronogym.vector.infos import to_columns
 
@@ -57,12 +58,17 @@ def resolve_env_id(env_id: str) -> EnvSpec:
     return gym.spec(env_id)
 
 
-def build_env(env_fn: EnvFactory | EnvSpec | str, env_kwargs: dict[str, Any] | None = None):
-    """Create one env from a factory, a registered spec or an id."""
+def build_env(
+    env_fn: EnvFactory | EnvSpec | str,
+    env_kwargs: dict[str, Any] | None = None,
+    registry: DriverRegistry | None = None,
+):
+    """Create one env from a factory, a registered spec or an id. A factory that makes an id
+    of the driver's script gets it from ``registry`` (:mod:`chronogym.vector.driver_registry`)."""
     if isinstance(env_fn, str):
         env_fn = resolve_env_id(env_fn)
     if not isinstance(env_fn, EnvSpec):
-        return env_fn()
+        return make_with_driver_ids(env_fn, registry)
     try:
         return gym.make(env_fn, **(env_kwargs or {}))
     except ModuleNotFoundError as error:
@@ -89,11 +95,13 @@ class EnvGroup:
         restart_counts: Sequence[int] | None = None,
         env_kwargs: dict[str, Any] | None = None,
         env_errors: str = "raise",
+        registry: DriverRegistry | None = None,
     ) -> None:
         if len(env_fns) != len(indices):
             raise ValueError(f"{len(env_fns)} env factories for {len(indices)} env indices")
         self.env_fns = list(env_fns)
         self.env_kwargs = env_kwargs
+        self.registry = registry
         self.indices = list(indices)
         self.autoreset_mode = AutoresetMode(autoreset_mode)
         self.env_errors = check_env_errors(env_errors)
@@ -104,7 +112,7 @@ class EnvGroup:
         self.envs = []
         for j, fn in enumerate(self.env_fns):
             try:
-                self.envs.append(build_env(fn, env_kwargs))
+                self.envs.append(build_env(fn, env_kwargs, registry))
             except Exception as error:
                 self.build_error = EnvRaised.capture(error, self.indices[j], "make", self.labels[j])
                 break
@@ -155,7 +163,7 @@ class EnvGroup:
     def _rebuild(self, j: int) -> int:
         with contextlib.suppress(Exception):  # a broken env may fail to close
             self.envs[j].close()
-        self.envs[j] = build_env(self.env_fns[j], self.env_kwargs)
+        self.envs[j] = build_env(self.env_fns[j], self.env_kwargs, self.registry)
         self.restart_counts[j] += 1
         return restart_seed(self.seed_roots[j], self.indices[j], self.restart_counts[j])
 

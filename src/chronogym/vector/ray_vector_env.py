@@ -7,6 +7,7 @@ import socket
 from collections.abc import Sequence
 from typing import Any
 
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.vector import AutoresetMode
 
 from chronogym.ray_runtime import (
@@ -21,6 +22,7 @@ from chronogym.validation import check_bool, check_int, check_number
 from chronogym.vector.actor_transport import ActorBackend
 from chronogym.vector.backend import Backend, EnvFactory
 from chronogym.vector.checks import normalize_env_fns
+from chronogym.vector.driver_registry import DriverRegistry, script_registered_ids
 from chronogym.vector.driver_worker import DriverWorkerBackend
 from chronogym.vector.env_errors import check_env_errors
 from chronogym.vector.socket_transport import SocketBackend, check_spin_us
@@ -214,3 +216,13 @@ class RayVectorEnv(WorkerVectorEnv):
             env_kwargs=env_kwargs,
             env_errors=env_errors,
         )
+
+    def _driver_registry(self, env_fns: list[Any]) -> DriverRegistry | None:
+        """The specs of the ids this script registered, for factories that make them in a
+        worker (:mod:`chronogym.vector.driver_registry`); None when no factory or no id."""
+        ids = script_registered_ids()
+        if not ids or all(isinstance(fn, (str, EnvSpec)) for fn in env_fns):
+            return None
+        from ray import cloudpickle  # honours register_pickle_by_value
+
+        return DriverRegistry(cloudpickle.dumps, ids)

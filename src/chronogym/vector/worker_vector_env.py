@@ -61,6 +61,7 @@ from chronogym.vector.checks import (
     normalize_env_fns,
     workers_of,
 )
+from chronogym.vector.driver_registry import DriverRegistry
 from chronogym.vector.env_errors import (
     CRASH_LOOP_TAIL,
     EnvErrorSeen,
@@ -122,6 +123,7 @@ class WorkerVectorEnv(VectorEnv):
         self.num_workers = len(self._slices)
         self._env_fns = [resolve_env_id(fn) if isinstance(fn, str) else fn for fn in fns]
         self._env_kwargs = env_kwargs
+        self._registry = self._driver_registry(self._env_fns)
         self._seed_roots = [int(np.random.SeedSequence().generate_state(1)[0])] * self.num_envs
         self._restart_counts = [0] * self.num_envs
         self.restarts: deque[tuple[int, str]] = deque(maxlen=1000)  # (env index, error)
@@ -157,7 +159,12 @@ class WorkerVectorEnv(VectorEnv):
             "restart_counts": self._restart_counts[lo:hi],
             "env_kwargs": self._env_kwargs,
             "env_errors": self.env_errors,
+            "registry": self._registry,
         }
+
+    def _driver_registry(self, env_fns: list[Any]) -> DriverRegistry | None:
+        """The ids the workers need from this process (none: workers share its registry)."""
+        return None
 
     def _check_spaces(self) -> tuple[Any, Any, dict[str, Any], str | None]:
         """Spaces of worker 0, after checking that every worker reports the same."""
