@@ -24,7 +24,7 @@ import pytest
 from gymnasium import spaces
 from gymnasium.utils.env_checker import check_env
 
-from chronogym import FunctionTask, SimEnv, TaskDefinitionError, register_task
+from chronogym import FunctionTask, RenderModeError, SimEnv, TaskDefinitionError, register_task
 from chronogym.engines.mujoco import gl_unavailable
 from chronogym.registration import NAMESPACE, OPTIONAL_TASKS
 from chronogym.tasks.cartpole import XML_PATH, CartPoleTask, ChronoCartPoleTask
@@ -150,9 +150,16 @@ def test_task_without_render_lists_no_mode_and_refuses_rgb_array():
     assert env.unwrapped.metadata["render_modes"] == []
     assert checked(env) == []
     env.close()
-    refusal = r"render_mode='rgb_array': NoRenderCartPole does not render.*expected None$"
+    refusal = (
+        r"^chronogym-test/NoRenderCartPole-v0: render_mode='rgb_array': NoRenderCartPole does "
+        r"not render.*expected None$"
+    )
     with pytest.raises(ValueError, match=refusal):
         gym.make("chronogym-test/NoRenderCartPole-v0", render_mode="rgb_array")
+    # also a TypeError: SB3's make_vec_env then retries without a render mode, as it does
+    with pytest.raises(TypeError, match=refusal) as raised:
+        gym.make("chronogym-test/NoRenderCartPole-v0", render_mode="rgb_array")
+    assert isinstance(raised.value, RenderModeError)
 
 
 def test_chrono_task_refuses_rgb_array_before_building_anything():
@@ -296,7 +303,10 @@ def test_without_opengl_check_env_passes_and_rgb_array_is_refused(scenario, tmp_
         assert result["render_modes"] == [], env_id
         assert result["render_warnings"] == [], env_id
         assert result["refusal"] is not None, env_id
-        pattern = rf"^render_mode='rgb_array': {task} cannot render in this process: {reason}"
+        # gymnasium.make's re-raise puts the id first
+        pattern = (
+            rf"^{env_id}: render_mode='rgb_array': {task} cannot render in this process: {reason}"
+        )
         assert re.search(pattern, result["refusal"]), result["refusal"]
         ending = "; until then, expected render_mode=None (runs without rendering)"
         assert result["refusal"].endswith(ending)

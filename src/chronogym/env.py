@@ -12,7 +12,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from chronogym.actions import check_invalid_action_mode, prepare_action
 from chronogym.advance import Advancer
-from chronogym.errors import TaskDefinitionError
+from chronogym.errors import RenderModeError, TaskDefinitionError
 from chronogym.task import FunctionTask, Task, check_task_definition, check_task_spaces
 from chronogym.validation import check_int, show
 
@@ -123,7 +123,7 @@ def check_observation(task: Task, obs: Any, space: gym.Space, where: str) -> Non
 def _usable_render_modes(task: Task, render_mode: Any) -> list[str]:
     """The task's render modes if this process can render them, else ``[]``.
 
-    Raise ValueError when ``render_mode`` is not None and not one of them.
+    Raise RenderModeError (a ValueError) when ``render_mode`` is not None and not one of them.
     """
     declared = list(task.render_modes)
     reason = task.render_unavailable() if declared else None
@@ -144,12 +144,12 @@ def _usable_render_modes(task: Task, render_mode: Any) -> list[str]:
         if render_mode == "human":
             why += " (for a window, wrap it in gymnasium.wrappers.HumanRendering)"
     if reason:  # the reason says what to set up; until then, only None works here
-        raise ValueError(
+        raise RenderModeError(
             f"render_mode={render_mode!r}: {why}; until then, expected render_mode=None "
             "(runs without rendering)"
         )
     expected = " or ".join(repr(m) for m in [None, *usable])
-    raise ValueError(f"render_mode={render_mode!r}: {why}; expected {expected}")
+    raise RenderModeError(f"render_mode={render_mode!r}: {why}; expected {expected}")
 
 
 class SimEnv(gym.Env):

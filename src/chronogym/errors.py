@@ -24,6 +24,26 @@ class TaskDefinitionError(ChronogymError, TypeError):
     """A Task lacks a required piece or declares an invalid one."""
 
 
+class RenderModeError(ChronogymError, ValueError, TypeError):
+    """A ``render_mode`` this env cannot render (its task does not render that mode, or this
+    process lacks what rendering needs).
+
+    A ``ValueError``, and also a ``TypeError``: Stable-Baselines3's ``make_vec_env`` asks
+    every id for ``render_mode="rgb_array"`` and falls back to no render mode on a
+    ``TypeError`` only. ``gymnasium.make`` re-raises a ``TypeError`` of an env's constructor
+    with "was raised from the environment creator for <id> with kwargs (...)" appended; here
+    the id goes first instead, and the kwargs (which hold the render mode already) go.
+    """
+
+    GYMNASIUM_SUFFIX = " was raised from the environment creator for "
+
+    def __init__(self, message: str) -> None:
+        head, found, where = message.partition(self.GYMNASIUM_SUFFIX)
+        if found:
+            message = f"{where.split(' with kwargs ')[0]}: {head}"
+        super().__init__(message)
+
+
 class WorkerCrashLoopError(ChronogymError, RuntimeError):
     """An environment kept failing: it failed again right after being rebuilt (a crash loop at
     construction or reset), or it spent its restart budget (``max_restarts``).
