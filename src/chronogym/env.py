@@ -13,7 +13,7 @@ from gymnasium.envs.registration import EnvSpec
 from chronogym.actions import check_invalid_action_mode, prepare_action
 from chronogym.advance import Advancer
 from chronogym.errors import RenderModeError, TaskDefinitionError
-from chronogym.task import FunctionTask, Task, check_task_definition, check_task_spaces
+from chronogym.task import FunctionTask, Task, check_dt, check_task_definition, check_task_spaces
 from chronogym.validation import check_int, show
 
 #: Spaces whose elements are arrays of one shape and dtype (checked by shape and dtype).
@@ -201,6 +201,7 @@ class SimEnv(gym.Env):
         self.task = task
         self.invalid_action = invalid_action
         task.init()
+        check_dt(task)  # again: init() may have set it (MujocoTask: from the model)
         check_task_spaces(task)
         self.observation_space = task.observation_space
         self.action_space = task.action_space

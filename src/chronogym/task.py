@@ -47,6 +47,9 @@ class Task:
     """
 
     dt: float
+    dt_from_init: bool = False
+    """True when ``init()`` may set ``dt`` (``MujocoTask``: from the model's timestep);
+    ``dt = None`` is then checked after ``init()``."""
     k: int = 1
     max_episode_steps: int | None = None
     observation_space: Any = None
@@ -125,9 +128,8 @@ def check_task_definition(task: Task) -> None:
             f"Task {type(task).__name__} is missing {', '.join(m + '()' for m in missing)}; "
             f"every Task must define {', '.join(REQUIRED_METHODS)}"
         )
-    dt = getattr(task, "dt", None)
-    if not (is_number(dt) and math.isfinite(dt) and dt > 0):
-        raise invalid(f"Task {type(task).__name__}: dt={dt!r}, expected a finite float > 0", dt)
+    if not (task.dt_from_init and getattr(task, "dt", None) is None):
+        check_dt(task)
     k = getattr(task, "k", None)
     if not (is_int(k) and k >= 1):
         raise invalid(f"Task {type(task).__name__}: k={k!r}, expected an integer >= 1", k)
@@ -139,6 +141,13 @@ def check_task_definition(task: Task) -> None:
             "expected None or an integer >= 1",
             steps,
         )
+
+
+def check_dt(task: Task) -> None:
+    """Raise TaskDefinitionError unless the task's ``dt`` is a finite float > 0."""
+    dt = getattr(task, "dt", None)
+    if not (is_number(dt) and math.isfinite(dt) and dt > 0):
+        raise invalid(f"Task {type(task).__name__}: dt={dt!r}, expected a finite float > 0", dt)
 
 
 def check_render_modes(task: Task) -> None:

@@ -80,3 +80,27 @@ def test_matching_and_constructor_dt_do_not_warn():
         env = gym.make("chronogym/CartPole-v0", dt=0.001)  # an argument: chosen on purpose
         assert env.unwrapped.task.model.opt.timestep == 0.001
         assert SimEnv(CartPoleTask()).task.model.opt.timestep == 0.002
+
+
+@pytest.mark.parametrize(("timestep", "expected"), [(0.005, 0.005), (None, 0.002)])
+def test_a_task_without_dt_takes_the_models_timestep(timestep, expected):
+    class NoDt(Pendulum):
+        pass
+
+    NoDt.timestep = timestep
+    env = SimEnv(NoDt())
+    assert env.dt == expected and env.unwrapped.task.model.opt.timestep == expected
+    env.reset(seed=0)
+    env.step(np.zeros(1, np.float32))
+    assert env.sim_time == pytest.approx(expected)
+    env.close()
+
+
+def test_a_task_whose_init_leaves_dt_none_is_rejected():
+    class StillNone(Pendulum):
+        def init(self):
+            super().init()
+            self.dt = None
+
+    with pytest.raises(ValueError, match="Task StillNone: dt=None, expected a finite float > 0"):
+        SimEnv(StillNone())

@@ -158,6 +158,7 @@ class MujocoTask(Task):
     """
 
     dt: float | None = None  # type: ignore[assignment]
+    dt_from_init = True  # dt None: init() takes the model's timestep
     render_modes: tuple[str, ...] = ("rgb_array",)
     render_width: int = 480
     render_height: int = 360
