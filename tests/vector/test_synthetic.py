@@ -129,3 +129,16 @@ def test_vector_entry_point_builds_serial():
     )
     assert isinstance(vec, SerialVectorEnv) and vec.observation_space.shape == (3, 16)
     vec.close()
+
+
+def test_step_cost_can_be_changed_in_place():
+    env = SyntheticEnv(step_ms=1.0)
+    env.step_ms, env.cv = 4.0, 0.5
+    drawn = durations(env, 0, 20_000)
+    assert drawn.mean() == pytest.approx(4.0, rel=0.05) and drawn.std() > 1.0
+    with pytest.raises(ValueError, match="step_ms=-3"):
+        env.step_ms = -3
+    vec = SerialVectorEnv(ENV_ID, 2, env_kwargs={"step_ms": 0})
+    vec.set_attr("step_ms", 0.5)
+    assert vec.get_attr("step_ms") == (0.5, 0.5)
+    vec.close()

@@ -100,8 +100,8 @@ class SyntheticEnv(gym.Env):
         reset_ms: float = 0.0,
         precise_sleep: bool = True,
     ) -> None:
-        self.step_ms = check_number("step_ms", step_ms, low=0, expected="milliseconds >= 0")
-        self.cv = check_number("cv", cv, low=0, expected="a coefficient of variation >= 0")
+        self._step_ms, self._cv = 0.0, 0.0
+        self.step_ms, self.cv = step_ms, cv
         self.obs_dim = check_int("obs_dim", obs_dim, low=1)
         self.info_floats = check_int("info_floats", info_floats, low=0)
         self.action_dim = check_int("action_dim", action_dim, low=1)
@@ -110,18 +110,35 @@ class SyntheticEnv(gym.Env):
         self.precise_sleep = check_bool("precise_sleep", precise_sleep)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.obs_dim,), np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
-        drawn = self.cv > 0 and self.step_ms > 0
-        self._lognormal = lognormal_parameters(self.step_ms, self.cv) if drawn else None
         self._t = 0
         self._lead_s = 0.0
         self._slack_thread: int | None = None
 
     # -- durations ------------------------------------------------------------------------
+    @property
+    def step_ms(self) -> float:
+        """Mean step duration, ms; settable (``vec.set_attr("step_ms", 0.1)``), as is ``cv``."""
+        return self._step_ms
+
+    @step_ms.setter
+    def step_ms(self, value: float) -> None:
+        self._step_ms = check_number("step_ms", value, low=0, expected="milliseconds >= 0")
+        self._lead_s = 0.0
+
+    @property
+    def cv(self) -> float:
+        """Coefficient of variation of the step durations (0: constant)."""
+        return self._cv
+
+    @cv.setter
+    def cv(self, value: float) -> None:
+        self._cv = check_number("cv", value, low=0, expected="a coefficient of variation >= 0")
+
     def draw_duration_ms(self) -> float:
         """The next step's duration, ms, drawn from ``np_random`` (no waiting)."""
-        if self._lognormal is None:
-            return self.step_ms
-        mu, sigma = self._lognormal
+        if self._cv == 0 or self._step_ms == 0:
+            return self._step_ms
+        mu, sigma = lognormal_parameters(self._step_ms, self._cv)
         return float(self.np_random.lognormal(mu, sigma))
 
     def _wait(self, seconds: float) -> None:
