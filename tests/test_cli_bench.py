@@ -107,4 +107,5 @@ def test_recommendation_is_one_worker_per_core_with_the_fewest_envs():
     slow = recommend(StepModel(0.00001, 0.001, 0.001), cores=8)
     assert not slow.reached and slow.workers == 1
     assert bench_workers(cpus=2, max_workers=16) == [1, 2, 4]
-    assert bench_workers(cpus=32, max_workers=8) == [1, 2, 4]
+    assert bench_workers(cpus=32, max_workers=8) == [1, 2, 4, 8]
+    assert bench_workers(cpus=6, max_workers=3) == [1, 2, 3]

@@ -290,8 +290,9 @@ def synthetic_step_s(step_s: float, seconds: float) -> float:
 
 
 def bench_workers(cpus: int, max_workers: int) -> list[int]:
-    """W of the fit: 1, 2, 4 and ``cpus``, none above ``max_workers``."""
-    return sorted({w for w in (1, 2, 4, cpus) if w <= max_workers} | {1})
+    """W of the fit: 1, 2, 4 and ``cpus``, none above ``max_workers`` (which replaces
+    ``cpus`` when ``cpus`` is larger)."""
+    return sorted({w for w in (1, 2, 4, min(cpus, max_workers)) if w <= max_workers})
 
 
 @dataclass
