@@ -424,15 +424,23 @@ def stragglers(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 
 def add_relative_efficiency(runs: list[dict[str, Any]]) -> None:
-    """E(W) / E(1) of each run, against the same path, envs per worker and step cost."""
+    """E(W) / E(1) of each run, against the same path, envs per worker and step cost; and
+    ``x_async``, its env-steps/s over AsyncVectorEnv's at the same W and step cost (one env
+    per worker only)."""
     first = {}
     for run in runs:
         key = (run["path"], run["envs_per_worker"], run["step_ms"])
         if run["workers"] == 1:
             first[key] = run["efficiency"]
+    asynchronous = {
+        (r["workers"], r["step_ms"]): r["env_steps_per_s"] for r in runs if r["path"] == "async"
+    }
     for run in runs:
         base = first.get((run["path"], run["envs_per_worker"], run["step_ms"]))
         run["efficiency_rel_w1"] = run["efficiency"] / base if base else None
+        peer = asynchronous.get((run["workers"], run["step_ms"]))
+        same_envs = run["envs_per_worker"] == 1
+        run["x_async"] = run["env_steps_per_s"] / peer if peer and same_envs else None
 
 
 def fit_group(rows: list[dict[str, Any]], epw: int) -> dict[str, Any] | None:
@@ -500,9 +508,25 @@ def memory_fits(starts: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "max_workers": top["workers"],
                 "start_s_at_max": top["start_s"],
                 "worker_rss_mb_mean_at_max": top["worker_rss_mb_mean"],
+                **worker_memory(rows),
             }
         )
     return out
+
+
+def worker_memory(rows: list[dict[str, Any]]) -> dict[str, float | None]:
+    """What a worker holds: its RSS at one env (the interpreter, Ray's core worker, the
+    imports) and the MB each further env adds (mean over W, most against fewest envs)."""
+
+    def mean_rss(epw: int) -> float | None:
+        values = [r["worker_rss_mb_mean"] for r in rows if r["envs_per_worker"] == epw]
+        values = [v for v in values if v is not None]
+        return statistics.mean(values) if values else None
+
+    epws = sorted({r["envs_per_worker"] for r in rows})
+    low, high = mean_rss(epws[0]), mean_rss(epws[-1])
+    per_env = (high - low) / (epws[-1] - epws[0]) if low and high and len(epws) > 1 else None
+    return {"worker_rss_mb_base": low, "worker_rss_mb_per_env": per_env}
 
 
 # -- report -----------------------------------------------------------------------------------
@@ -517,6 +541,7 @@ RUN_COLUMNS = (
     Column("env-steps/s", 11, "{:,.0f}", key="env_steps_per_s"),
     Column("E(W)", 5, "{:.3f}", key="efficiency"),
     Column("E/E(1)", 6, "{:.3f}", key="efficiency_rel_w1"),
+    Column("x async", 7, "{:.2f}", key="x_async"),
 )
 FIT_COLUMNS = (
     Column("path", 13, align="<", key="path"),
@@ -547,6 +572,10 @@ STRAGGLER_COLUMNS = (
     Column("x barrier", 9, "{:.2f}", key="recv_min_envs_x_barrier"),
     Column("exact batch", 11, "{:,.0f}", key="exact_batch_env_steps_per_s"),
 )
+
+
+def fmt(value: float | None, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
 
 
 def with_none(columns: tuple[Column, ...], rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -696,7 +725,9 @@ def main(argv: list[str] | None = None) -> int:
     for entry in record["memory"]:
         print(
             f"  {entry['path']}: driver RSS {entry['driver_rss_mb_per_worker']:.2f} MB per worker; "
-            f"W={entry['max_workers']}: start {entry['start_s_at_max']:.1f} s"
+            f"W={entry['max_workers']}: start {entry['start_s_at_max']:.1f} s; a worker holds "
+            f"{fmt(entry['worker_rss_mb_base'], '.0f')} MB at its fewest envs, "
+            f"{fmt(entry['worker_rss_mb_per_env'], '.2f')} MB per further env"
         )
     if straggler_rows:
         print()
