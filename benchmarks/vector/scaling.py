@@ -109,6 +109,13 @@ def positive_int(text: str) -> int:
     return value
 
 
+def non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 0")
+    return value
+
+
 def positive_float(text: str) -> float:
     value = float(text)
     if not value > 0:
@@ -129,9 +136,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--nodes", type=positive_int, default=2, help="worker nodes of it")
     parser.add_argument("--seconds", type=positive_float, default=2.0, help="timed per setting")
     parser.add_argument("--min-steps", type=positive_int, default=20, help="timed, at least")
-    parser.add_argument("--warmup", type=int, default=10, help="untimed vector steps")
+    parser.add_argument("--warmup", type=non_negative_int, default=10, help="untimed vector steps")
     parser.add_argument("--obs-dim", type=positive_int, default=16)
-    parser.add_argument("--info-floats", type=int, default=0)
+    parser.add_argument("--info-floats", type=non_negative_int, default=0)
     parser.add_argument("--straggler-workers", type=positive_int, default=16)
     parser.add_argument("--no-stragglers", action="store_true")
     parser.add_argument(

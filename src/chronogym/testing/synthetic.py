@@ -123,7 +123,6 @@ class SyntheticEnv(gym.Env):
     @step_ms.setter
     def step_ms(self, value: float) -> None:
         self._step_ms = check_number("step_ms", value, low=0, expected="milliseconds >= 0")
-        self._lead_s = 0.0
 
     @property
     def cv(self) -> float:
