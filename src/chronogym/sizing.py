@@ -35,6 +35,7 @@ measurement runs.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -251,8 +252,6 @@ def time_vector_env(
 ) -> tuple[float, Timed]:
     """Build ``RayVectorEnv(env_id, workers * envs_per_worker)``, reset, step for ``seconds``:
     (seconds to the first reset, the timed steps)."""
-    import numpy as np
-
     from chronogym.vector.ray_vector_env import RayVectorEnv
 
     start = time.perf_counter()
@@ -267,13 +266,8 @@ def time_vector_env(
         vec.reset(seed=0)
         start_s = time.perf_counter() - start
         vec.action_space.seed(0)
-        actions = np.stack([vec.action_space.sample() for _ in range(8)])
-
-        def step(i: list[int] = [0]) -> None:  # noqa: B006 (a counter across calls)
-            vec.step(actions[i[0] % len(actions)])
-            i[0] += 1
-
-        return start_s, timed_loop(step, seconds)
+        actions = itertools.cycle([vec.action_space.sample() for _ in range(8)])
+        return start_s, timed_loop(lambda: vec.step(next(actions)), seconds)
     finally:
         vec.close()
 
