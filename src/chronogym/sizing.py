@@ -386,6 +386,12 @@ def format_report(report: BenchReport) -> str:
             f"check on the env itself, {run.workers} workers: step "
             f"{run.timed.wall_per_step * ms:.3f} ms measured, {predicted * ms:.3f} ms predicted"
         )
+        if run.timed.wall_per_step > 1.25 * predicted:
+            lines.append(
+                "  the model is optimistic here: the workers' compute (and the driver's) "
+                "compete for these cores, which sleeping synthetic steps do not; with a core "
+                "per worker besides the driver's, the prediction holds better"
+            )
     lines += [
         "",
         "predicted efficiency E(W) = S / t_step (rows: workers W; columns: envs per worker)",
