@@ -19,7 +19,7 @@ from chronogym.cli_errors import UsageError, user_error_message
 from chronogym.optim import open_storage
 
 CLI = [sys.executable, "-m", "chronogym.cli"]
-SUBCOMMANDS = ["demo", "optimize", "train", "play", "envs"]
+SUBCOMMANDS = ["demo", "optimize", "train", "play", "envs", "bench"]
 
 
 def run_cli(*args: str, cwd=None, debug: bool = False) -> subprocess.CompletedProcess:

@@ -1,4 +1,5 @@
-"""The ``chronogym`` command line: ``demo``, ``optimize``, ``train``, ``play`` and ``envs``.
+"""The ``chronogym`` command line: ``demo``, ``optimize``, ``train``, ``play``, ``envs`` and
+``bench``.
 
 Its options are in :mod:`chronogym.cli_parser`; how it reports errors (a line for bad input,
 a traceback for a bug) is in :mod:`chronogym.cli_errors`.
@@ -431,6 +432,39 @@ def cmd_envs(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Size a parallel run of ``args.env_id`` (:mod:`chronogym.sizing`)."""
+    import json
+
+    from chronogym.sizing import format_report, run_bench
+
+    try:
+        env_kwargs = json.loads(args.env_kwargs)
+    except json.JSONDecodeError as error:
+        raise UsageError(f"--env-kwargs={args.env_kwargs}: not JSON ({error})") from error
+    if not isinstance(env_kwargs, dict):
+        raise UsageError(f"--env-kwargs={args.env_kwargs}: expected a JSON object, e.g. '{{}}'")
+    if args.target > 1:
+        raise UsageError(f"--target={args.target}: expected an efficiency in (0, 1]")
+    try:
+        gym.spec(args.env_id)
+    except gym.error.Error as error:
+        raise UsageError(f"{args.env_id}: {error} (`chronogym envs` lists the ids)") from error
+    report = run_bench(
+        args.env_id,
+        env_kwargs,
+        seconds=args.seconds,
+        max_workers=args.max_workers,
+        address=args.address,
+        cores=args.cores,
+        target=args.target,
+        check=not args.no_check,
+    )
+    print()
+    print(format_report(report))
+    return 0
+
+
 #: Each subcommand: its function and the ``chronogym[...]`` extra that it needs.
 COMMANDS: dict[str, tuple[Callable[[argparse.Namespace], int], str | None]] = {
     "demo": (cmd_demo, None),
@@ -438,6 +472,7 @@ COMMANDS: dict[str, tuple[Callable[[argparse.Namespace], int], str | None]] = {
     "train": (cmd_train, "rl"),
     "play": (cmd_play, "rl"),
     "envs": (cmd_envs, None),
+    "bench": (cmd_bench, None),
 }
 
 

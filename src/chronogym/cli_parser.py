@@ -51,6 +51,11 @@ COMMAND_TEXTS = {
         "list registered environment ids, or describe one",
         "List the registered chronogym environment ids; with an id, describe that environment.",
     ),
+    "bench": (
+        "size a parallel run: measure an env's costs, predict efficiency",
+        "Time an env's step, then the vector env's fixed and per-worker costs; print the "
+        "expected parallel efficiency for workers x envs per worker, and recommend both.",
+    ),
 }
 
 
@@ -340,6 +345,41 @@ def add_envs(sub: Any) -> None:
     )
 
 
+def add_bench(sub: Any) -> None:
+    bench = add_command(sub, "bench")
+    bench.add_argument("env_id", metavar="ID", help="a registered id, e.g. chronogym/CartPole-v0")
+    bench.add_argument(
+        "--seconds",
+        type=float,
+        default=3.0,
+        action=AtLeast,
+        above=0,
+        help="seconds of timing per setting",
+    )
+    add_int(bench, "--max-workers", 16, "most Ray workers timed (the fit's largest W)")
+    add_int(bench, "--cores", None, "cores to plan for (default: the Ray cluster's CPUs)")
+    bench.add_argument(
+        "--target",
+        type=float,
+        default=0.8,
+        action=AtLeast,
+        above=0,
+        help="parallel efficiency the recommendation keeps",
+    )
+    bench.add_argument(
+        "--env-kwargs",
+        default="{}",
+        metavar="JSON",
+        help="keyword arguments of gymnasium.make, as a JSON object, e.g. '{\"k\": 10}'",
+    )
+    bench.add_argument(
+        "--no-check",
+        action="store_true",
+        help="skip the last run, on the env itself, that checks the model",
+    )
+    bench.add_argument("--address", help=ADDRESS_HELP)
+
+
 def build_parser() -> Parser:
     """The parser of ``chronogym``; ``args.subcommand`` names the subcommand chosen."""
     parser = Parser(
@@ -355,6 +395,6 @@ def build_parser() -> Parser:
         metavar="COMMAND",
         help="one of these (`chronogym COMMAND --help` shows its options):",
     )
-    for add in (add_demo, add_optimize, add_train, add_play, add_envs):
+    for add in (add_demo, add_optimize, add_train, add_play, add_envs, add_bench):
         add(sub)
     return parser

@@ -3,6 +3,8 @@
 Each id has an entry point (:func:`make_sim_env`: the SimEnv, whose ``spec`` shows the
 task's horizon) and a vector entry point (:func:`make_task_vector_env`: a RayVectorEnv, or
 another backend, for ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``).
+Plain Gymnasium envs that are not tasks (:data:`ENVS`: ``chronogym/Synthetic-v0``) have
+their own entry points, and vector entry points built on :func:`make_vector_env`.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import functools
 import importlib
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
@@ -35,6 +37,15 @@ TASKS: dict[str, str] = {
 OPTIONAL_TASKS: dict[str, str] = {
     "ChronoCartPole-v0": "chronogym.tasks.cartpole.chrono:ChronoCartPoleTask",  # pychrono
     "ChronoGo1Velocity-v0": "chronogym.tasks.quadruped.chrono_task:ChronoGo1VelocityTask",
+}
+
+# Plain Gymnasium envs (not Tasks): (entry point, vector entry point); the id's keyword
+# arguments go to the env's constructor.
+ENVS: dict[str, tuple[str, str]] = {
+    "Synthetic-v0": (
+        "chronogym.testing.synthetic:SyntheticEnv",
+        "chronogym.testing.synthetic:make_synthetic_vector_env",
+    ),
 }
 
 
@@ -81,6 +92,19 @@ def make_task_vector_env(
     (``envs_per_worker``, ``num_cpus``, ``autoreset_mode``...); every other keyword
     argument goes to :func:`make_sim_env` (the task's arguments, ``render_mode``...).
     """
+    factory = functools.partial(make_sim_env, **env_kwargs)
+    return make_vector_env(factory, num_envs, backend=backend, vector_options=vector_options)
+
+
+def make_vector_env(
+    factory: Callable[[], gym.Env],
+    num_envs: int,
+    *,
+    backend: str = "ray",
+    vector_options: Mapping[str, Any] | None = None,
+) -> gym.vector.VectorEnv:
+    """``num_envs`` envs built by ``factory`` on ``backend`` (see
+    :func:`make_task_vector_env`), ``vector_options`` to the vector env's constructor."""
     from chronogym.vector.factory import BACKENDS
 
     if backend not in BACKENDS:
@@ -92,7 +116,6 @@ def make_task_vector_env(
             f"vector_options={vector_options!r}: expected a dict of the {backend!r} vector "
             "env's keyword arguments (Gymnasium refuses vector_kwargs in this mode)"
         )
-    factory = functools.partial(make_sim_env, **env_kwargs)
     if backend == "ray":
         from chronogym.vector.ray_vector_env import RayVectorEnv
 
@@ -150,9 +173,16 @@ def _name(task: Any) -> str:
 
 
 def register_envs() -> None:
-    """Register every task shipped with chronogym (idempotent)."""
+    """Register every task and plain env shipped with chronogym (idempotent)."""
     for name, path in {**TASKS, **OPTIONAL_TASKS}.items():
         register_task(f"{NAMESPACE}/{name}", path)
+    for name, (entry_point, vector_entry_point) in ENVS.items():
+        if f"{NAMESPACE}/{name}" not in gym.registry:
+            gym.register(
+                id=f"{NAMESPACE}/{name}",
+                entry_point=entry_point,
+                vector_entry_point=vector_entry_point,
+            )
     from chronogym.vector.driver_registry import note_import_ids
 
     note_import_ids()  # what a worker has too: the ids registered later are the script's
