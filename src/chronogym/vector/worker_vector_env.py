@@ -224,7 +224,15 @@ class WorkerVectorEnv(VectorEnv):
     def _replace_worker(self, w: int, error: str) -> list[int]:
         """Replace a failed worker; return the fresh seeds of its envs."""
         lo, hi = self._slices[w]
-        logger.warning("chronogym: worker %d (envs %d..%d) replaced:\n%s", w, lo, hi - 1, error)
+        head = "\n".join([line for line in error.splitlines() if line.strip()][:2])
+        logger.warning(
+            "chronogym: worker %d (envs %d..%d) replaced: %s\n(the whole text: "
+            "info['worker_error'] of its envs, and the vector env's restarts)",
+            w,
+            lo,
+            hi - 1,
+            head,
+        )
         for i in range(lo, hi):
             self._count_restart(i, error)
         self._backend.replace(w, self._group_kwargs(w))
