@@ -79,6 +79,9 @@ def test_spread_workers_on_distinct_nodes_match_serial(cluster):
     )
     try:
         nodes = [cluster.node_of_pid(pid) for pid in vec.worker_pids()]
+        # the driver's node: its own sockets; every other node: that node's relay
+        assert vec._backend.connected() == [node == "node_0" for node in nodes]
+        assert vec._backend.relayed() == [node != "node_0" for node in nodes]
         distributed = go1_rollout(vec, steps=60)
     finally:
         vec.close()
@@ -93,6 +96,89 @@ def test_spread_workers_on_distinct_nodes_match_serial(cluster):
     for got, want in zip(distributed, reference, strict=True):
         assert got.dtype == want.dtype
         assert got.tobytes() == want.tobytes()
+
+
+def test_relayed_workers_survive_a_kill_and_a_lost_relay(cluster):
+    import os
+    import signal
+    import time
+
+    import ray
+
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+
+    vec = RayVectorEnv(
+        "chronogym/CartPole-v0",
+        3,
+        envs_per_worker=1,
+        num_cpus=0.5,
+        address=cluster.address,
+        scheduling="spread",
+    )
+    actions = np.zeros((3, 1), dtype=np.float32)
+    try:
+        relays = vec._backend._relays
+        for actor in relays.by_node.values():  # each relay's socket folder is private
+            mode = ray.get(actor.__ray_call__.remote(lambda self: os.stat(self.dir).st_mode))
+            assert mode & 0o777 == 0o700
+        relayed = [w for w, on in enumerate(vec._backend.relayed()) if on]
+        assert relayed, "spread placement left no worker on another node"
+        vec.reset(seed=0)
+        vec.step(actions)
+        victim = relayed[0]
+        os.kill(vec.worker_pids()[victim], signal.SIGKILL)
+        time.sleep(0.3)
+        _, _, _, truncated, info = vec.step(actions)
+        assert truncated.tolist() == [w == victim for w in range(3)]
+        assert "ActorDiedError" in info["worker_error"][victim]
+        vec.step(actions)  # the replacement steps (through a relay or a socket of this node)
+        assert vec._backend.relayed()[victim] or vec._backend.connected()[victim]
+
+        node, relay = next(iter(relays.by_node.items()))
+        served = [w for w, n in relays.node_of.items() if n == node]
+        ray.kill(relay)
+        with pytest.raises(ray.exceptions.RayActorError):  # wait until it is gone
+            for _ in range(100):
+                ray.get(relay.pid.remote(), timeout=10)
+                time.sleep(0.1)
+        _, _, _, truncated, info = vec.step(actions)
+        assert all(truncated[w] for w in served)
+        assert f"the relay of node {node} failed" in info["worker_error"][served[0]]
+        vec.step(actions)
+        vec.step(actions)  # its workers were replaced, with a new relay where needed
+        assert all(vec._backend.relayed()[w] or vec._backend.connected()[w] for w in range(3))
+    finally:
+        vec.close()
+    assert vec._backend._relays is None  # closed: the relays are gone too
+
+
+def test_a_relayed_worker_silent_past_step_timeout_is_replaced(cluster):
+    import time
+
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+
+    vec = RayVectorEnv(
+        "chronogym/Synthetic-v0",
+        3,
+        envs_per_worker=1,
+        num_cpus=0.5,
+        address=cluster.address,
+        scheduling="spread",
+        step_timeout=1.5,
+        env_kwargs={"step_ms": 1.0},
+    )
+    try:
+        slow = vec._backend.relayed().index(True)
+        vec.reset(seed=0)
+        vec.set_attr("step_ms", [5000.0 if w == slow else 1.0 for w in range(3)])
+        start = time.perf_counter()
+        _, _, _, truncated, info = vec.step(np.zeros((3, 2), dtype=np.float32))
+        assert time.perf_counter() - start < 15
+        assert truncated.tolist() == [w == slow for w in range(3)]
+        assert "step_timeout=1.5" in info["worker_error"][slow]
+        vec.step(np.zeros((3, 2), dtype=np.float32))  # the replacement answers
+    finally:
+        vec.close()
 
 
 def test_bad_scheduling_is_rejected_by_name(cluster):

@@ -143,7 +143,7 @@ def split_handles(handles: list[Any], own: type) -> tuple[list[int], list[int]]:
 def gather_split(
     workers: list[int],
     handles: list[Any],
-    own: type,
+    own: type | tuple[type, ...],
     resolve: Callable[[Any], Outcome],
     gather_others: Callable[[list[int], list[Any]], list[Outcome]],
 ) -> list[Outcome]:

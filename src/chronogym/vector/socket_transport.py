@@ -7,8 +7,10 @@ Unix socket in a private directory (``mkdtemp``, mode 0700: only
 this user can connect; nothing on the network) from a daemon thread. Every
 step of Box spaces -- the barrier ``step`` and ``send`` / ``recv`` -- then
 writes one message per worker (its action bytes) and reads the answer from
-the socket. Everything else (reset, call, workers on other nodes, non-Box
-spaces) uses plain actor calls.
+the socket. A worker on another node steps through its node's relay
+(:mod:`chronogym.vector.relay`): one Ray call per node carries the steps of all its
+workers, which the relay serves over Unix sockets on that node. Everything else
+(reset, call, non-Box spaces) uses plain actor calls.
 
 Waiting: a blocked read costs a wake-up, ~40 us per direction on a virtual
 machine whose idle core must be woken, more than a cheap step. So each end
@@ -48,6 +50,7 @@ from chronogym.validation import check_number
 from chronogym.vector.actor_transport import ActorBackend, ActorGroup
 from chronogym.vector.backend import Outcome, gather_split
 from chronogym.vector.group import EnvGroup
+from chronogym.vector.relay import RelayHandle, Relays
 from chronogym.vector.wire_format import (
     ANSWER,
     REQUEST,
@@ -65,6 +68,7 @@ DEATH_PROBE_S = 10.0  # how long to ask Ray why a worker whose socket broke died
 #: chosen with benchmarks/archive/socket_spin.py (results/socket_spin.json).
 DEFAULT_SPIN_US = 250.0
 MIXED_POLL_S = 1e-3  # recv over socket and actor-call workers: how often to look at each
+RELAY_MARGIN_S = 10.0  # a relay's call may take this much longer than step_timeout
 
 logger = logging.getLogger("chronogym")
 
@@ -133,6 +137,12 @@ class SocketWorker(ActorGroup):
             return False
         serve_socket(self, path, spin_us)
         return True
+
+    def node_id(self) -> str:
+        """The Ray node this worker runs on."""
+        import ray
+
+        return ray.get_runtime_context().get_node_id()
 
 
 def serve_socket(group: EnvGroup, path: str, spin_us: float = DEFAULT_SPIN_US) -> None:
@@ -213,6 +223,7 @@ class SocketBackend(ActorBackend):
         self._recv_spinner = AdaptiveSpin(0.0)
         self._bufs: list[bytearray] = []
         self._opened = 0  # sockets opened so far (unique file names)
+        self._relays: Relays | None = None  # workers on other nodes: their node's relay
 
     # -- connections ----------------------------------------------------------------------
     def start(self, group_kwargs: list[dict[str, Any]]) -> None:
@@ -224,6 +235,7 @@ class SocketBackend(ActorBackend):
         self._spinners = [AdaptiveSpin(self.spin_us * 1e-6) for _ in self.actors]
         self._recv_spinner = AdaptiveSpin(self.spin_us * 1e-6)
         self._bufs = [bytearray(4096) for _ in self.actors]
+        self._relays = Relays(self.spin_us, self.step_timeout, self.start_timeout or 120.0)
         self._connect(list(range(len(self.actors))))
 
     @property
@@ -232,8 +244,13 @@ class SocketBackend(ActorBackend):
         return self._dir
 
     def connected(self) -> list[bool]:
-        """Which workers step over a socket (the others: plain actor calls)."""
+        """Which workers step over a socket of this node (the others: relays or plain calls)."""
         return [s is not None for s in self._socks]
+
+    def relayed(self) -> list[bool]:
+        """Which workers step through their node's relay (:mod:`chronogym.vector.relay`)."""
+        node_of = self._relays.node_of if self._relays is not None else {}
+        return [w in node_of for w in range(len(self.actors))]
 
     def _connect(self, workers: list[int]) -> None:
         """Ask ``workers`` to listen (those on this node) and connect to them."""
@@ -245,9 +262,24 @@ class SocketBackend(ActorBackend):
             self._opened += 1
             paths[w] = os.path.join(self._dir, f"w{w}-{self._opened}.sock")
         refs = {w: self.actors[w].open_socket.remote(paths[w], node, self.spin_us) for w in workers}
+        elsewhere = []
         for w in workers:
             sock = self._socks[w] = self._dial(refs[w], paths[w])
             self._pollers[w] = None if sock is None else _poller(sock)
+            if sock is None:
+                elsewhere.append(w)
+        if elsewhere:
+            self._connect_relayed(elsewhere)
+
+    def _connect_relayed(self, workers: list[int]) -> None:
+        """Workers on other nodes step through their node's relay (plain calls if that fails)."""
+        assert self._relays is not None
+        nodes = {w: self.actors[w].node_id.remote() for w in workers}
+        found = {}
+        for w, ref in nodes.items():
+            with contextlib.suppress(Exception):  # a dead worker is found by its next call
+                found[w] = (self.actors[w], self._ray.get(ref, timeout=self.start_timeout))
+        self._relays.connect(found, self.start_timeout)
 
     def _dial(self, listening: Any, path: str) -> socket.socket | None:
         """A connection to the socket a worker opened; None (plain calls) if it could not."""
@@ -268,6 +300,8 @@ class SocketBackend(ActorBackend):
         return sock
 
     def _disconnect(self, w: int) -> None:
+        if self._relays is not None:
+            self._relays.forget(w)
         sock, self._socks[w], self._pollers[w] = self._socks[w], None, None
         if sock is not None:
             with contextlib.suppress(OSError):
@@ -281,6 +315,9 @@ class SocketBackend(ActorBackend):
     def shutdown(self) -> None:
         for w in range(len(self._socks)):
             self._disconnect(w)
+        if self._relays is not None:
+            self._relays.shutdown()
+            self._relays = None
         super().shutdown()
         if self._dir is not None:
             shutil.rmtree(self._dir, ignore_errors=True)
@@ -290,6 +327,9 @@ class SocketBackend(ActorBackend):
     def submit(self, worker: int, method: str, *args: Any) -> Any:
         """A step of a connected worker goes over its socket; anything else, plain."""
         sock = self._socks[worker]
+        if method == STEP_METHOD and sock is None and self._relayed(worker):
+            timed = bool(args[1]) if len(args) > 1 else False
+            return self._relays.submit(worker, args[0], timed)  # type: ignore[union-attr]
         if method != STEP_METHOD or sock is None:
             return super().submit(worker, method, *args)
         deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
@@ -362,20 +402,66 @@ class SocketBackend(ActorBackend):
         return True
 
     def gather(self, workers: list[int], handles: list[Any]) -> list[Outcome]:
-        return gather_split(workers, handles, SockHandle, self._resolve, super().gather)
+        self._flush()
+        return gather_split(
+            workers, handles, (SockHandle, RelayHandle), self._resolve_any, super().gather
+        )
+
+    def _resolve_any(self, handle: SockHandle | RelayHandle) -> Outcome:
+        if isinstance(handle, SockHandle):
+            return self._resolve(handle)
+        return self._resolve_relayed(handle)
+
+    def _relayed(self, worker: int) -> bool:
+        return self._relays is not None and worker in self._relays.node_of
+
+    def _flush(self) -> None:
+        """Send the steps queued for relays: one call per node."""
+        if self._relays is not None and self._relays.pending:
+            self._relays.flush()
+
+    def _resolve_relayed(self, handle: RelayHandle) -> Outcome:
+        """A relayed worker's answer, decoded as if read from its socket here (once)."""
+        if handle.outcome is None:
+            assert self._relays is not None
+            timeout = None if self.step_timeout is None else self.step_timeout + RELAY_MARGIN_S
+            self._relays.resolve(handle.call, timeout)
+            w = handle.worker
+            if handle.call.failure is not None:
+                handle.outcome = self._lost_relayed(w, handle.call.failure)
+            else:
+                ok, value = handle.call.answers.get(w, (False, "no answer from the relay"))  # type: ignore[union-attr]
+                if ok:
+                    status, *sizes = ANSWER.unpack_from(value)
+                    handle.outcome = decode_answer(status, sizes, memoryview(value))
+                else:
+                    handle.outcome = self._lost_relayed(w, value)
+        return handle.outcome
+
+    def _lost_relayed(self, w: int, why: str) -> Outcome:
+        """A relayed worker's step failed: the worker is lost (Ray's reason, when it has one)."""
+        self._disconnect(w)
+        if "step_timeout" in why:
+            return Outcome(False, None, why, lost=True)
+        return Outcome(False, None, f"{self._death_cause(w)}\n({why})", lost=True)
 
     def wait(self, handles: list[Any], num_returns: int, timeout: float | None) -> list[int]:
-        """Indices of ``handles`` that have answered: sockets by ``poll``, calls by ``ray.wait``."""
+        """Indices of ``handles`` that have answered: sockets by ``poll``, calls (and relays'
+        calls) by ``ray.wait``."""
+        self._flush()
         socks = {k: h for k, h in enumerate(handles) if isinstance(h, SockHandle)}
+        refs = {
+            k: h.call.ref if isinstance(h, RelayHandle) else h
+            for k, h in enumerate(handles)
+            if k not in socks
+        }
         if not socks:
-            return super().wait(handles, num_returns, timeout)
-        refs = {k: h for k, h in enumerate(handles) if k not in socks}
-        ref_keys, ref_handles = list(refs), list(refs.values())
+            return sorted(self._ready(refs, num_returns, timeout))
         if num_returns == len(handles) and timeout is None:  # a barrier: read every answer
             for h in socks.values():
                 self._resolve(h)
             if refs:
-                super().wait(ref_handles, len(refs), None)
+                self._ready(refs, len(refs), None)
             return list(range(len(handles)))
         deadline = None if timeout is None else time.monotonic() + timeout
         done: set[int] = set()
@@ -383,7 +469,7 @@ class SocketBackend(ActorBackend):
         while True:
             done |= {k for k, h in socks.items() if k not in done and self._answered(h)}
             if refs:
-                done |= {ref_keys[i] for i in super().wait(ref_handles, len(refs), 0)}
+                done |= self._ready(refs, len(refs), 0)
             if len(done) >= num_returns or (deadline is not None and time.monotonic() >= deadline):
                 return sorted(done)
             budget = None if deadline is None else max(0.0, deadline - time.monotonic())
@@ -391,6 +477,13 @@ class SocketBackend(ActorBackend):
                 budget = MIXED_POLL_S if budget is None else min(budget, MIXED_POLL_S)
             self._poll([h.worker for k, h in socks.items() if k not in done], spinner, budget)
             spinner = None  # spin once per wait
+
+    def _ready(self, refs: dict[int, Any], num_returns: int, timeout: float | None) -> set[int]:
+        """Keys of ``refs`` whose call has answered; several keys may share one relay call."""
+        unique = list(dict.fromkeys(refs.values()))
+        ready = ActorBackend.wait(self, unique, min(num_returns, len(unique)), timeout)
+        answered = {id(unique[i]) for i in ready}
+        return {k for k, ref in refs.items() if id(ref) in answered}
 
     def _poll(
         self, workers: list[int], spinner: AdaptiveSpin | None, timeout: float | None

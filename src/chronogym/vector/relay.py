@@ -1,0 +1,261 @@
+"""Per-node relays: one Ray call per node and step, not one per worker.
+
+A worker on the driver's node gets its steps over a Unix socket
+(:mod:`chronogym.vector.socket_transport`). A worker on another node cannot: a Unix socket
+does not cross machines, and a plain Ray actor call costs the driver ~0.4-0.8 ms of CPU per
+worker and step, which caps a 64-worker cluster run at ~20 vector steps/s whatever the
+physics costs (``benchmarks/results/scaling.json``). So each other node gets a
+:class:`NodeRelay`, a Ray actor pinned to that node. The driver sends it the action bytes of
+all its node's workers in *one* actor call; the relay writes them to the workers' Unix
+sockets on its node (a private mode-0700 folder there, as on the driver's node), reads the
+answers and returns them as raw bytes, which the driver decodes as if it had read them from
+a socket (:func:`~chronogym.vector.wire_format.decode_answer`). The driver's work per step
+is then one call per node plus a decode per worker.
+
+Security: the driver and a relay talk through Ray's own (authenticated) channel; a relay and
+its workers through Unix sockets in a private folder of their node. No TCP listener is
+opened.
+
+Faults: a worker whose socket fails (EOF, a reset, ``step_timeout``) is reported lost by the
+relay, and the driver replaces it as any lost worker, then connects its replacement. A relay
+that dies (its node is lost) makes every worker it served lost; a new relay is started for
+their replacements' nodes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import socket
+import tempfile
+from dataclasses import dataclass, field
+from typing import Any
+
+from chronogym.vector.wire_format import ANSWER, REQUEST, fill
+
+#: What a relay returns per worker: (worker, True, the answer's bytes) or (worker, False, why).
+RelayAnswer = tuple[int, bool, Any]
+
+
+class NodeRelay:
+    """A Ray actor on one node: steps that node's workers over their Unix sockets."""
+
+    def __init__(self, spin_us: float, step_timeout: float | None, accept_timeout: float) -> None:
+        self.spin_us = spin_us
+        self.step_timeout = step_timeout
+        self.accept_timeout = accept_timeout
+        self.dir = tempfile.mkdtemp(prefix="chronogym-relay-")
+        os.chmod(self.dir, 0o700)
+        self.socks: dict[int, socket.socket] = {}
+        self.bufs: dict[int, bytearray] = {}
+        self.opened = 0
+
+    def node_id(self) -> str:
+        import ray
+
+        return ray.get_runtime_context().get_node_id()
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def connect(self, worker: int, actor: Any) -> bool:
+        """Ask ``actor`` (worker ``worker``, on this node) to serve a socket here; dial it."""
+        import ray
+
+        self.disconnect(worker)
+        self.opened += 1
+        path = os.path.join(self.dir, f"w{worker}-{self.opened}.sock")
+        if not ray.get(actor.open_socket.remote(path, self.node_id(), self.spin_us)):
+            return False  # not on this node after all
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            sock.settimeout(self.accept_timeout)
+            sock.connect(path)
+        except OSError:
+            sock.close()
+            return False
+        sock.settimeout(self.step_timeout)
+        self.socks[worker] = sock
+        self.bufs[worker] = bytearray(4096)
+        return True
+
+    def disconnect(self, worker: int) -> None:
+        sock = self.socks.pop(worker, None)
+        self.bufs.pop(worker, None)
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.close()
+
+    def step(self, requests: list[tuple[int, bytes, bool]]) -> list[RelayAnswer]:
+        """Send each worker its action bytes, then read every answer (raw bytes)."""
+        lost: dict[int, str] = {}
+        for worker, data, timed in requests:
+            sock = self.socks.get(worker)
+            if sock is None:
+                lost[worker] = "the relay holds no socket to this worker"
+                continue
+            try:
+                sock.sendall(REQUEST.pack(len(data), timed) + data)
+            except OSError as error:
+                lost[worker] = self._lost(worker, error)
+        answers: list[RelayAnswer] = []
+        for worker, _, _ in requests:
+            if worker in lost:
+                answers.append((worker, False, lost[worker]))
+                continue
+            try:
+                answers.append((worker, True, self._read(worker)))
+            except (OSError, EOFError) as error:
+                answers.append((worker, False, self._lost(worker, error)))
+        return answers
+
+    def _read(self, worker: int) -> bytes:
+        sock, view = self.socks[worker], memoryview(self.bufs[worker])
+        got = fill(sock, view, 0, ANSWER.size)
+        _, *sizes = ANSWER.unpack_from(view)
+        total = ANSWER.size + sum(sizes)
+        if total > len(view):
+            bigger = bytearray(total)
+            bigger[:got] = view[:got]
+            self.bufs[worker] = bigger
+            view = memoryview(bigger)
+        fill(sock, view, got, total)
+        return bytes(view[:total])
+
+    def _lost(self, worker: int, error: BaseException) -> str:
+        self.disconnect(worker)
+        if isinstance(error, TimeoutError):
+            return f"no answer within step_timeout={self.step_timeout} s (through its node's relay)"
+        return f"worker {worker}'s socket on its node failed: {type(error).__name__}: {error}"
+
+    def shutdown(self) -> None:
+        for worker in list(self.socks):
+            self.disconnect(worker)
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+@dataclass
+class RelayCall:
+    """One relay call in flight: the steps of some of its node's workers."""
+
+    node: str
+    ref: Any = None  # the ObjectRef of NodeRelay.step
+    answers: dict[int, tuple[bool, Any]] | None = None  # worker -> (ok, bytes or why)
+    failure: str | None = None  # the call itself failed (the relay or its node died)
+
+
+@dataclass
+class RelayHandle:
+    """One worker's step, sent through its node's relay."""
+
+    worker: int
+    data: bytes
+    timed: bool
+    call: RelayCall
+    outcome: Any = None
+
+
+@dataclass
+class Relays:
+    """The driver's relays, one per node, and which workers each serves."""
+
+    spin_us: float
+    step_timeout: float | None
+    accept_timeout: float
+    by_node: dict[str, Any] = field(default_factory=dict)  # node id -> NodeRelay actor
+    node_of: dict[int, str] = field(default_factory=dict)  # relayed worker -> node id
+    pending: dict[str, list[RelayHandle]] = field(default_factory=dict)  # not sent yet
+
+    def relay(self, node: str) -> Any:
+        """The relay of ``node``, started there if there is none yet."""
+        if node not in self.by_node:
+            import ray
+            from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+            actor_cls = ray.remote(NodeRelay).options(
+                num_cpus=0,
+                max_restarts=0,
+                scheduling_strategy=NodeAffinitySchedulingStrategy(node, soft=False),
+            )
+            self.by_node[node] = actor_cls.remote(
+                self.spin_us, self.step_timeout, self.accept_timeout
+            )
+        return self.by_node[node]
+
+    def connect(self, workers: dict[int, tuple[Any, str]], timeout: float | None) -> list[int]:
+        """Connect each worker (its actor, its node) to its node's relay; the ones connected."""
+        import ray
+
+        refs = {
+            w: self.relay(node).connect.remote(w, actor) for w, (actor, node) in workers.items()
+        }
+        done = []
+        for w, ref in refs.items():
+            try:
+                ok = ray.get(ref, timeout=timeout)
+            except Exception:
+                ok = False
+            if ok:
+                self.node_of[w] = workers[w][1]
+                done.append(w)
+        return done
+
+    def forget(self, worker: int) -> None:
+        """Worker ``worker`` is gone or replaced: its relay drops its socket."""
+        node = self.node_of.pop(worker, None)
+        if node is not None and node in self.by_node:
+            with contextlib.suppress(Exception):
+                self.by_node[node].disconnect.remote(worker)
+
+    def submit(self, worker: int, data: bytes, timed: bool) -> RelayHandle:
+        """Queue a step of ``worker``; it leaves with its node's others at :meth:`flush`."""
+        node = self.node_of[worker]
+        queued = self.pending.setdefault(node, [])
+        call = queued[0].call if queued else RelayCall(node)
+        handle = RelayHandle(worker, bytes(data), timed, call)
+        queued.append(handle)
+        return handle
+
+    def flush(self) -> None:
+        """Send every queued step: one call per node."""
+        for node, handles in self.pending.items():
+            requests = [(h.worker, h.data, h.timed) for h in handles]
+            handles[0].call.ref = self.by_node[node].step.remote(requests)
+        self.pending = {}
+
+    def resolve(self, call: RelayCall, timeout: float | None) -> None:
+        """Wait for ``call``'s answers (once); a failed call marks the relay dead."""
+        if call.answers is not None or call.failure is not None:
+            return
+        import ray
+
+        try:
+            answers = ray.get(call.ref, timeout=timeout)
+        except Exception as error:
+            call.failure = f"the relay of node {call.node} failed: {type(error).__name__}: {error}"
+            self.drop_node(call.node)
+            return
+        call.answers = {worker: (ok, value) for worker, ok, value in answers}
+
+    def drop_node(self, node: str) -> None:
+        """Forget a dead relay (and its node's workers: they are replaced)."""
+        actor = self.by_node.pop(node, None)
+        if actor is not None:
+            import ray
+
+            with contextlib.suppress(Exception):
+                ray.kill(actor, no_restart=True)
+        for worker in [w for w, n in self.node_of.items() if n == node]:
+            del self.node_of[worker]
+
+    def shutdown(self) -> None:
+        import ray
+
+        refs = [actor.shutdown.remote() for actor in self.by_node.values()]
+        with contextlib.suppress(Exception):
+            ray.get(refs, timeout=5.0)
+        for actor in self.by_node.values():
+            with contextlib.suppress(Exception):
+                ray.kill(actor, no_restart=True)
+        self.by_node, self.node_of, self.pending = {}, {}, {}
