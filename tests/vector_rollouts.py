@@ -41,8 +41,11 @@ def rows_of(out: tuple, env_ids: np.ndarray) -> dict[int, tuple]:
     }
 
 
-def async_rollout(vec, steps: int, min_envs: int) -> tuple[dict, dict, list]:
-    """async_reset, then send/recv with ``min_envs`` until every env took ``steps`` steps.
+def async_rollout(
+    vec, steps: int, min_envs: int, max_envs: int | None = None
+) -> tuple[dict, dict, list]:
+    """async_reset, then send/recv with ``min_envs`` (and ``max_envs``) until every env took
+    ``steps`` steps.
 
     Returns per-env trajectories, per-env actions and the env ids of every recv.
     """
@@ -53,9 +56,10 @@ def async_rollout(vec, steps: int, min_envs: int) -> tuple[dict, dict, list]:
     vec.async_reset(seed=SEED)
     while vec.envs_in_flight.size:
         k = min(min_envs, vec.envs_in_flight.size)
-        out = vec.recv(min_envs=k)
+        out = vec.recv(min_envs=k, max_envs=max_envs)
         ids = out[5]
         assert len(ids) >= k and len(ids) == len(out[0]) == len(out[1])
+        assert max_envs is None or len(ids) <= max_envs
         batches.append(ids.tolist())
         for i, row in rows_of(out, ids).items():
             traj[i].append(row)

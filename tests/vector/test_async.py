@@ -48,6 +48,40 @@ def test_partial_batches_match_sync_per_env(ray_cluster, mode):
     assert ends >= len(fns)  # autoresets are covered
 
 
+@pytest.mark.parametrize("backend", ["socket", "actor"])
+def test_batch_mode_returns_exactly_max_envs_and_matches_sync(ray_cluster, backend):
+    fns = uneven_fns()
+    vec = RayVectorEnv(fns, envs_per_worker=1, transport=backend)
+    traj, acts, (batches, skew) = async_rollout(vec, STEPS, min_envs=2, max_envs=2)
+    vec.close()
+    # EnvPool's batch: exactly min(2, envs in flight) every time (async_rollout checks
+    # min(2, in flight) <= len(ids) <= 2), although all 6 envs were in flight at first
+    assert len(batches[0]) == 2 and sum(len(b) == 2 for b in batches) > 0.9 * len(batches)
+    assert skew >= 2, f"workers never drifted apart (batches: {batches[:20]})"
+    reference = sync_replay(fns, acts, STEPS, "NextStep")
+    for i in range(len(fns)):
+        for t, (got, want) in enumerate(zip(traj[i], reference[i], strict=True)):
+            assert data_equivalence(got, want, exact=True), f"env {i} differs at step {t}"
+
+
+def test_answers_beyond_max_envs_wait_for_the_next_recv(ray_cluster):
+    vec = SerialVectorEnv(uneven_fns((5, 5)), envs_per_worker=2)
+    vec.reset(seed=0)
+    vec.send(np.zeros((4, 1), np.float32))  # both workers answer at once (serial)
+    assert vec.recv(max_envs=2)[5].tolist() == [0, 1]  # the earliest sent first
+    assert vec.envs_in_flight.tolist() == [2, 3]  # answered, not yet received
+    with pytest.raises(EnvsInFlightError):
+        vec.step(np.zeros((4, 1), np.float32))
+    assert vec.recv()[5].tolist() == [2, 3]
+    vec.send(np.zeros((4, 1), np.float32))
+    with pytest.raises(ValueError, match=r"max_envs=3: expected None or a multiple of"):
+        vec.recv(max_envs=3)
+    with pytest.raises(ValueError, match=r"min_envs=4 > max_envs=2"):
+        vec.recv(min_envs=4, max_envs=2)
+    vec.recv()
+    vec.close()
+
+
 def async_vector_rollout(vec, steps: int, seed: int = 11) -> list:
     """vector_rollout, with step_async/step_wait instead of step."""
     out = [vec.reset(seed=seed)]

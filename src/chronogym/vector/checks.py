@@ -81,6 +81,20 @@ def check_max_restarts(max_restarts: int) -> int:
     return check_int("max_restarts", max_restarts, low=-1, expected=expected)
 
 
+def check_max_envs(max_envs: Any, in_flight: int, envs_per_worker: int) -> int | None:
+    """``max_envs`` of ``recv``: None, or a multiple of ``envs_per_worker`` >= 1."""
+    if max_envs is None:
+        return None
+    expected = (
+        f"None or a multiple of envs_per_worker={envs_per_worker} >= 1 (calls are per "
+        f"worker; {in_flight} envs are in flight)"
+    )
+    check_int("max_envs", max_envs, low=1, expected=expected)
+    if max_envs % envs_per_worker:
+        raise ValueError(f"max_envs={max_envs}: expected {expected}")
+    return int(max_envs)
+
+
 def check_min_envs(min_envs: int | None, in_flight: int) -> int:
     """``recv``'s ``min_envs``: None (every env in flight) or 1..in_flight."""
     if min_envs is None:

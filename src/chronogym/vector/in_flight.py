@@ -38,6 +38,7 @@ class PendingCall:
     handle: Any  # what Backend.submit returned
     submitted: float  # time.monotonic() at submission
     args: tuple[Any, ...]  # kept to redo a reset on a replacement worker
+    outcome: Outcome | None = None  # answered, but left for a later collect (``limit``)
 
 
 class InFlight:
@@ -79,15 +80,44 @@ class InFlight:
     def clear(self) -> None:
         self.calls.clear()
 
-    def collect(self, need: int, timeout: float | None) -> dict[int, tuple[PendingCall, Outcome]]:
+    def collect(
+        self, need: int, timeout: float | None, limit: int | None = None
+    ) -> dict[int, tuple[PendingCall, Outcome]]:
         """Wait until answered workers hold ``need`` envs; take their calls and outcomes.
 
-        Every worker answered by then is taken too; one silent past the backend's
-        ``step_timeout`` counts as lost. On ``timeout``, RecvTimeoutError and nothing
-        is taken.
+        Every worker answered by then is taken too, up to ``limit`` envs (None: no limit):
+        the earliest sent first, the rest left answered for the next collect, which takes
+        them first. One silent past the backend's ``step_timeout`` counts as lost. On
+        ``timeout``, RecvTimeoutError and nothing is taken.
         """
+        outcomes = self._wait_outcomes(need, timeout)
+        taken = sorted(outcomes, key=lambda w: (self.calls[w].submitted, w))
+        if limit is not None:
+            kept = self._fit(taken, limit)
+            if self._count_envs(set(kept)) < need:  # a smaller last worker in the way
+                kept = self._fit(sorted(taken, key=lambda w: -self._count_envs({w})), limit)
+            for w in set(taken) - set(kept):
+                self.calls[w].outcome = outcomes[w]  # answered: the next collect's
+            taken = kept
+        return {w: (self.calls.pop(w), outcomes[w]) for w in sorted(taken)}
+
+    def _fit(self, workers: list[int], limit: int) -> list[int]:
+        """``workers`` in order, each kept while the envs kept stay within ``limit``."""
+        kept, count = [], 0
+        for w in workers:
+            size = self._count_envs({w})
+            if count + size <= limit:
+                kept.append(w)
+                count += size
+        return kept
+
+    def _wait_outcomes(self, need: int, timeout: float | None) -> dict[int, Outcome]:
+        """The outcomes of every worker answered once ``need`` envs have answered."""
+        known = {w: call.outcome for w, call in self.calls.items() if call.outcome is not None}
         deadline = None if timeout is None else time.monotonic() + timeout
-        ready = set(self._ready(sorted(self.calls), 0.0))
+        ready = set(known) | set(
+            self._ready([w for w in sorted(self.calls) if w not in known], 0.0)
+        )
         overdue: set[int] = set()
         while self._count_envs(ready | overdue) < need:
             waiting = [w for w in sorted(self.calls) if w not in ready | overdue]
@@ -101,12 +131,12 @@ class InFlight:
                 )
         rest = [w for w in sorted(self.calls) if w not in ready | overdue]
         ready |= set(self._ready(rest, 0.0))
-        answered = sorted(ready)
+        answered = sorted(ready - set(known))
         gathered = self._backend.gather(answered, [self.calls[w].handle for w in answered])
-        outcomes = dict(zip(answered, gathered, strict=True))
+        outcomes = {**known, **dict(zip(answered, gathered, strict=True))}
         message = self._overdue_message or f"no answer within step_timeout={self._step_timeout} s"
         outcomes.update({w: Outcome(False, None, message, lost=True) for w in overdue})
-        return {w: (self.calls.pop(w), outcomes[w]) for w in sorted(outcomes)}
+        return outcomes
 
     def _ready(self, workers: list[int], timeout: float | None, first: bool = False) -> list:
         """Which of ``workers`` have answered (wait up to ``timeout``; for one, if ``first``)."""

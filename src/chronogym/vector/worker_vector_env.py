@@ -55,6 +55,7 @@ from chronogym.vector.batching import join_obs, rows_of, split_actions
 from chronogym.vector.checks import (
     check_env_ids,
     check_envs_per_worker,
+    check_max_envs,
     check_max_restarts,
     check_min_envs,
     check_reset_mask,
@@ -583,15 +584,23 @@ class WorkerVectorEnv(VectorEnv):
         self._in_flight.submit(CallKind.RESET, "reset", workers, args)
 
     def recv(
-        self, min_envs: int | None = None, timeout: float | None = None
+        self,
+        min_envs: int | None = None,
+        timeout: float | None = None,
+        max_envs: int | None = None,
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any], np.ndarray]:
-        """Results of at least ``min_envs`` envs in flight (default: all of them).
+        """Results of at least ``min_envs`` envs in flight (default: all of them, at most
+        ``max_envs``).
 
         Returns as soon as the workers that answered hold ``min_envs`` envs,
-        with every env whose worker has answered by then:
-        ``(obs, rewards, terminations, truncations, infos, env_ids)``, rows in
-        ascending ``env_ids`` order, infos batched over those rows. A reset
-        comes back with reward 0 and both flags False.
+        with every env whose worker has answered by then, up to ``max_envs``
+        (None: no limit; a multiple of ``envs_per_worker``): the earliest sent
+        first, and envs answered beyond it stay in flight, returned first by the
+        next ``recv``. ``recv(min_envs=k, max_envs=k)`` is EnvPool's batch mode:
+        exactly ``k`` envs, the first to be ready. Returns ``(obs, rewards,
+        terminations, truncations, infos, env_ids)``, rows in ascending
+        ``env_ids`` order, infos batched over those rows. A reset comes back
+        with reward 0 and both flags False.
         """
         self._check_open()
         if not self._in_flight:
@@ -600,8 +609,14 @@ class WorkerVectorEnv(VectorEnv):
                 "async_reset() first",
                 "step",
             )
-        need = check_min_envs(min_envs, len(self.envs_in_flight))
-        answers = self._in_flight.collect(need, timeout)
+        in_flight = len(self.envs_in_flight)
+        limit = check_max_envs(max_envs, in_flight, self.envs_per_worker)
+        if min_envs is None and limit is not None:
+            min_envs = min(limit, in_flight)
+        need = check_min_envs(min_envs, in_flight)
+        if limit is not None and need > limit:
+            raise ValueError(f"min_envs={need} > max_envs={limit}; expected min_envs <= max_envs")
+        answers = self._in_flight.collect(need, timeout, limit)
         workers = sorted(answers)
         seen = EnvErrorSeen()
         results = []
