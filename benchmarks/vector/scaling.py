@@ -46,14 +46,18 @@ JSON, lands in ``a``), per step cost and pooled over step costs; and the driver'
 step ``a_cpu + b_cpu * W``. The model's predicted E(W) / E(1) at W = 64 and 256 comes from
 the fit at each step cost, and again with the driver's CPU as a floor under the step,
 ``t(W) = max(S + a + b W, a_cpu + b_cpu W)`` ("bound": a machine with W cores hides the
-workers' compute, never the driver's serial work per worker).
+workers' compute, never the driver's serial work per worker), and ("cores") from the step
+measured at W = 1 plus the driver's CPU per further worker, ``t(W) = t(1) + b_cpu (W - 1)``:
+what a machine with a core per worker shows when nothing but the driver's serial work grows
+with W (the issue's "measure b as the driver process's CPU time"; the wall time's b on 2
+cores also holds the workers' own wake-ups queueing for the 2 cores).
 
 Stragglers (W = ``--straggler-workers``, 10 ms, lognormal CV 0, 0.25, 0.5, socket path):
-the barrier's env-steps/s, and an EnvPool-style approximation with the existing API: every
-env kept in flight, each ``recv(min_envs=num_envs // 2)`` returns the workers that answered
-(at least half the envs) and they are sent again at once. :func:`run_exact_batch` is the
-slot for a batch mode whose ``recv`` returns exactly ``batch_size`` envs (not in this
-revision: reported as skipped).
+the barrier's env-steps/s; ``recv(min_envs=num_envs // 2)`` with every env kept in flight
+(each recv returns the workers that answered, at least half the envs, sent again at once);
+and EnvPool's batch mode, ``recv(min_envs=k, max_envs=k)`` with ``k = num_envs // 2``:
+exactly k envs per recv, the first ready (:func:`run_exact_batch`; skipped in a revision
+without ``max_envs``).
 
 Output: tables, JSON (default ``benchmarks/results/scaling.json``) and a PNG beside it:
 E(W) per path and step cost (top), driver CPU per step (bottom), one column per envs per
@@ -267,15 +271,19 @@ def run_barrier(vec: Any, args: argparse.Namespace) -> tuple[int, float, float]:
     return timed.steps, timed.wall_s, timed.cpu_s
 
 
-def run_recv_min_envs(vec: Any, seconds: float, batch: int) -> tuple[int, float]:
-    """Every env in flight; each ``recv(min_envs=batch)`` returns the workers that answered,
-    sent again at once: (env steps, seconds). Drains before returning."""
+def run_recv_min_envs(
+    vec: Any, seconds: float, batch: int, exact: bool = False
+) -> tuple[int, float]:
+    """Every env in flight; each ``recv(min_envs=batch)`` returns the workers that answered
+    (``exact``: ``max_envs=batch`` too, EnvPool's batch), sent again at once: (env steps,
+    seconds). Drains before returning."""
     actions = zero_actions(vec)
     vec.send(actions)
+    limit = {"max_envs": batch} if exact else {}
     done, start = 0, time.perf_counter()
     try:
         while time.perf_counter() - start < seconds:
-            ids = vec.recv(min_envs=batch)[5]
+            ids = vec.recv(min_envs=batch, **limit)[5]
             vec.send(actions[: len(ids)], ids)
             done += len(ids)
         return done, time.perf_counter() - start
@@ -284,9 +292,14 @@ def run_recv_min_envs(vec: Any, seconds: float, batch: int) -> tuple[int, float]
 
 
 def run_exact_batch(vec: Any, seconds: float, batch: int) -> tuple[int, float] | None:
-    """Slot for an EnvPool-style batch mode (``recv`` returning exactly ``batch`` envs):
-    None while the vector envs have none (issue 32's batch mode adds it)."""
-    return None
+    """EnvPool's batch mode, ``recv(min_envs=batch, max_envs=batch)``: exactly ``batch`` envs
+    per recv, the rest staying in flight; None in a revision whose ``recv`` has no
+    ``max_envs`` (to compare revisions)."""
+    import inspect
+
+    if "max_envs" not in inspect.signature(vec.recv).parameters:
+        return None
+    return run_recv_min_envs(vec, seconds, batch, exact=True)
 
 
 def measure(
@@ -413,13 +426,20 @@ def stragglers(args: argparse.Namespace) -> list[dict[str, Any]]:
                 "recv_min_envs_env_steps_per_s": done / seconds,
                 "recv_min_envs_x_barrier": done / seconds / barrier,
                 "exact_batch_env_steps_per_s": exact[0] / exact[1] if exact else None,
+                "exact_batch_x_barrier": exact[0] / exact[1] / barrier if exact else None,
                 "exact_batch_note": None if exact else "no exact batch mode in this revision",
                 "ideal_env_steps_per_s": ideal_rate(workers, 1, STRAGGLER_STEP_MS),
             }
             rows.append(row)
+            exact_text = (
+                f", recv(min_envs={batch}, max_envs={batch}) "
+                f"{row['exact_batch_env_steps_per_s']:,.0f}"
+                if exact
+                else ""
+            )
             print(
                 f"  CV {cv:g}: barrier {barrier:,.0f}, recv(min_envs={batch}) "
-                f"{row['recv_min_envs_env_steps_per_s']:,.0f} env-steps/s",
+                f"{row['recv_min_envs_env_steps_per_s']:,.0f}{exact_text} env-steps/s",
                 flush=True,
             )
     finally:
@@ -475,6 +495,14 @@ def predicted(fit: dict[str, Any], step_ms: float, epw: int, workers: int, bound
     return t(1) / t(workers)
 
 
+def predicted_on_cores(t1_ms: float, b_cpu_us: float, workers: int) -> float:
+    """E(W) / E(1) on a machine with a core per worker: the step measured at W = 1, plus the
+    driver's serial CPU per further worker, ``t(W) = t(1) + b_cpu (W - 1)`` (the workers'
+    own compute and wake-ups run in parallel there; 2 cores cannot show that, so the wall
+    time's b here overstates it)."""
+    return t1_ms / (t1_ms + b_cpu_us / 1e3 * (workers - 1))
+
+
 def fits(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per path and envs per worker: the fit at each step cost (with its predictions) and
     pooled over the step costs."""
@@ -490,7 +518,11 @@ def fits(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 continue
             entry = {"path": path, "envs_per_worker": epw, "step_ms": step_ms, **fit}
             if step_ms is not None:
+                one = [r["wall_ms_per_step"] for r in chosen if r["workers"] == 1]
                 for w in PREDICT_AT:
+                    entry[f"predicted_rel_e_{w}_cores"] = (
+                        predicted_on_cores(one[0], fit["b_cpu_us"], w) if one else None
+                    )
                     entry[f"predicted_rel_e_{w}"] = predicted(fit, step_ms, epw, w, False)
                     entry[f"predicted_rel_e_{w}_driver_bound"] = predicted(
                         fit, step_ms, epw, w, True
@@ -558,6 +590,8 @@ FIT_COLUMNS = (
     Column("b us", 7, "{:,.1f}", key="b_us"),
     Column("a_cpu us", 8, "{:,.0f}", key="a_cpu_us"),
     Column("b_cpu us", 8, "{:,.1f}", key="b_cpu_us"),
+    Column("E64 cores", 9, "{:.2f}", key="predicted_rel_e_64_cores"),
+    Column("E256 cores", 10, "{:.2f}", key="predicted_rel_e_256_cores"),
     Column("E64/E1", 6, "{:.2f}", key="predicted_rel_e_64"),
     Column("E256/E1", 7, "{:.2f}", key="predicted_rel_e_256"),
     Column("E64 bound", 9, "{:.2f}", key="predicted_rel_e_64_driver_bound"),
@@ -578,6 +612,7 @@ STRAGGLER_COLUMNS = (
     Column("recv(min_envs) env-steps/s", 26, "{:,.0f}", key="recv_min_envs_env_steps_per_s"),
     Column("x barrier", 9, "{:.2f}", key="recv_min_envs_x_barrier"),
     Column("exact batch", 11, "{:,.0f}", key="exact_batch_env_steps_per_s"),
+    Column("x barrier", 9, "{:.2f}", key="exact_batch_x_barrier"),
 )
 
 
@@ -723,7 +758,8 @@ def main(argv: list[str] | None = None) -> int:
     print(table(RUN_COLUMNS, with_none(RUN_COLUMNS, runs), rule=True))
     print()
     print("fit t_step = S + a + b*W (S = epw x step ms); driver CPU = a_cpu + b_cpu*W;")
-    print("E64/E1, E256/E1: the model's E(W)/E(1); bound: the step at least the driver's CPU")
+    print("E64/E1, E256/E1: the model's E(W)/E(1); bound: the step at least the driver's CPU;")
+    print("cores: t(W) = t(1) + b_cpu (W - 1), a core per worker (only the driver's CPU adds)")
     print("(step ms '-': fitted over every step cost)")
     print(table(FIT_COLUMNS, with_none(FIT_COLUMNS, record["fits"]), rule=True))
     print()
