@@ -12,27 +12,35 @@ transport, hop by hop (file: function):
 2. ``worker_vector_env.py``: ``_call_all`` -> ``Backend.submit`` for every worker
    (``backend.py`` defines the protocol). ``socket_transport.py``:
    ``SocketBackend.submit`` writes a request (``wire_format.py``: ``REQUEST``) to the
-   worker's socket. Other backends: ``actor_transport.py``: ``ActorBackend.submit`` (a
-   Ray actor call); ``serial.py``: ``LocalBackend.submit`` (runs the call at once);
+   worker's socket, or, for a worker on another node, queues it for that node's relay
+   (``relay.py``: ``Relays.submit``; ``Relays.flush`` sends one ``NodeRelay.step`` call
+   per node, which writes the requests to its workers' sockets there). Other backends:
+   ``actor_transport.py``: ``ActorBackend.submit`` (a Ray actor call); ``serial.py``:
+   ``LocalBackend.submit`` (runs the call at once);
    ``driver_worker.py``: ``DriverWorkerBackend.submit`` (the driver's own worker).
 3. In the worker, ``socket_transport.py``: ``_serve_conn`` reads the request
    (``wire_format.py``: ``fill``) and calls ``group.py``: ``EnvGroup.step_packed`` ->
-   ``EnvGroup.step`` (Gymnasium's autoreset; an env that raised is rebuilt), which
+   ``EnvGroup.step`` (Gymnasium's autoreset; an env that raised answers with an
+   ``EnvRaised``, ``env_errors.py``, or is rebuilt with ``env_errors="restart"``), which
    returns a ``StepAnswer`` (``backend.py``); ``wire_format.py``: ``encode_answer``
    turns it into the answer's bytes (infos as columns: ``infos.py``: ``to_columns``).
 4. Back in the driver, ``Backend.gather`` -> ``socket_transport.py``:
-   ``SocketBackend._read`` -> ``wire_format.py``: ``decode_answer``: one ``Outcome``
-   (``backend.py``) per worker, holding its ``StepAnswer`` or its error.
-5. ``worker_vector_env.py``: ``_step_result`` unpacks each answer, logs the envs
-   rebuilt inside workers, and replaces a lost worker (``_replace_worker`` ->
-   ``Backend.replace``), reporting its envs truncated.
+   ``SocketBackend._read`` (or ``_resolve_relayed``: the relay's answer for that worker)
+   -> ``wire_format.py``: ``decode_answer``: one ``Outcome`` (``backend.py``) per
+   worker, holding its ``StepAnswer`` or its error.
+5. ``worker_vector_env.py``: ``_step_parts`` unpacks each answer (``_step_result``),
+   logs the envs rebuilt inside workers, replaces a lost worker (``_replace_worker`` ->
+   ``Backend.replace``; ``worker_death.py`` names the signal it died of), reporting its
+   envs truncated, and raises an env's own exception once every answer is read
+   (``env_errors.py``: ``driver_error``).
 6. ``worker_vector_env.py``: ``_join_results`` joins the workers' parts
    (``batching.py``: ``join_obs``; ``infos.py``: ``join_infos``).
 
 ``send`` / ``recv`` (and ``step_async`` / ``step_wait``, ``async_reset``) take the same
 hops, except that the calls wait in ``in_flight.py``: ``InFlight.submit`` /
 ``InFlight.collect`` (``Backend.wait``, then ``Backend.gather``) until enough envs
-have answered, and ``_pending_result`` reads each answer. The docs' "How it works" page
+have answered (at most ``max_envs``: the rest stay answered for the next ``recv``), and
+``_pending_result`` reads each answer. The docs' "How it works" page
 (docs/how-it-works.md) tells the whole story: processes, what travels, where faults are caught.
 
 :mod:`chronogym.optim.parallel` runs its Optuna trials on the same machinery: an
