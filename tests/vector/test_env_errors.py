@@ -93,7 +93,8 @@ def test_an_unpicklable_exception_arrives_as_worker_env_error(ray_cluster):
     vec = RayVectorEnv(buggy_fns("unpicklable", at=1, env=0), envs_per_worker=3)
     try:
         vec.reset(seed=0)
-        with pytest.raises(WorkerEnvError, match="unpicklable failure at step 1") as raised:
+        pattern = r"UnpicklableError: unpicklable failure at step 1 \(raised by env 0 \(BuggyEnv\)"
+        with pytest.raises(WorkerEnvError, match=pattern) as raised:
             vec.step(ACTIONS)
         assert raised.value.type_name == "faulty_tasks.UnpicklableError"
         assert "env 0 (BuggyEnv) in step()" in remote_text(raised.value)

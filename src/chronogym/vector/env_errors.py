@@ -168,7 +168,11 @@ def driver_error(raised: EnvRaised, worker: int) -> BaseException:
         )
     error = _unpickled(raised)
     if error is None:
-        error = WorkerEnvError(f"{raised.type_name}: {raised.message}", raised.type_name)
+        error = WorkerEnvError(
+            f"{raised.type_name}: {raised.message} (raised by {where(raised, worker)}; its "
+            "class could not be rebuilt here)",
+            raised.type_name,
+        )
     note = f"raised by {where(raised, worker)} (chronogym: the worker's traceback is above)"
     if hasattr(error, "add_note"):
         error.add_note(note)
