@@ -30,10 +30,12 @@ from chronogym.registration import NAMESPACE, OPTIONAL_TASKS
 from chronogym.tasks.cartpole import XML_PATH, CartPoleTask, ChronoCartPoleTask
 
 # Every registered chronogym id but those on an optional engine (tests/chrono checks those).
-ENV_IDS = sorted(
+ENV_IDS = sorted(  # the shipped tasks (not chronogym/Synthetic-v0, a plain env that never renders)
     env_id
     for env_id, spec in gym.registry.items()
-    if spec.namespace == NAMESPACE and env_id.removeprefix(f"{NAMESPACE}/") not in OPTIONAL_TASKS
+    if spec.namespace == NAMESPACE
+    and env_id.removeprefix(f"{NAMESPACE}/") not in OPTIONAL_TASKS
+    and "task" in spec.kwargs
 )
 
 
@@ -124,6 +126,12 @@ for _flag in (True, False):
         entry_point=make_function_env,
         kwargs={"with_render": _flag},
     )
+
+
+def test_the_synthetic_env_refuses_every_render_mode_by_name():
+    assert gym.make("chronogym/Synthetic-v0").unwrapped.metadata["render_modes"] == []
+    with pytest.raises(RenderModeError, match="SyntheticEnv does not render; expected None"):
+        gym.make("chronogym/Synthetic-v0", render_mode="rgb_array")
 
 
 def test_ids_cover_the_shipped_mujoco_tasks():

@@ -43,6 +43,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from chronogym.errors import RenderModeError
 from chronogym.validation import check_bool, check_int, check_number
 
 ENV_ID = "chronogym/Synthetic-v0"
@@ -99,7 +100,13 @@ class SyntheticEnv(gym.Env):
         max_steps: int = 1000,
         reset_ms: float = 0.0,
         precise_sleep: bool = True,
+        render_mode: str | None = None,
     ) -> None:
+        if render_mode is not None:  # a TypeError too: SB3's make_vec_env then asks for None
+            raise RenderModeError(
+                f"render_mode={render_mode!r}: SyntheticEnv does not render; expected None"
+            )
+        self.render_mode = None
         self._step_ms, self._cv = 0.0, 0.0
         self.step_ms, self.cv = step_ms, cv
         self.obs_dim = check_int("obs_dim", obs_dim, low=1)
