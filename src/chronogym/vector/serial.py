@@ -80,18 +80,8 @@ class SerialVectorEnv(WorkerVectorEnv):
         max_restarts: restarts allowed per env before WorkerCrashLoopError
             (-1: no limit), with ``env_errors="restart"``.
         invalid_action: ``"raise"`` (default) or ``"clip"`` for NaN/Inf actions.
-        env_errors: what a Python exception raised by an env's own code
-            (construction, ``reset``, ``step``, ``call``, ``render``) does.
-            ``"raise"`` (default, as Gymnasium's vector envs): it is raised
-            here, from the call that met it, as its own class (or
-            ``WorkerEnvError`` where it does not pickle), naming the env
-            index and id, with the worker's traceback chained; the call's
-            results are lost, so the next ``step`` needs a ``reset()``.
-            ``"restart"`` (long unattended runs): the env is rebuilt,
-            reseeded and reported truncated with ``info["worker_error"]``, up
-            to ``max_restarts`` times; one that fails again right after its
-            rebuild ends the run with ``WorkerCrashLoopError``. A worker
-            process that dies is replaced either way.
+        env_errors: ``"raise"`` (default) or ``"restart"``: what an env's own
+            exception does, as in :class:`chronogym.RayVectorEnv`.
         env_kwargs: keyword arguments for ``gymnasium.make`` when ``env_fns``
             is an id.
         **ray_only: ``RayVectorEnv``'s arguments about Ray and processes
