@@ -1,5 +1,6 @@
 """What the benchmark scripts share: the JSON header and machine record, writing the JSON,
-aligned text tables, PNG figures, and reading ``/proc`` (CPU time, process tables).
+aligned text tables, PNG figures, reading ``/proc`` (CPU time, process tables), and the
+argparse types of positive and non-negative numbers.
 
 Not a script: the scripts are modules of the ``benchmarks`` package, run from the repository
 root as ``python -m benchmarks.<folder>.<script>``, and import this as ``benchmarks.common``.
@@ -229,3 +230,30 @@ def cpu_percent(pids: list[int], run: Callable[[], Any]) -> dict[str, float]:
         "workers": 100 * used / wall,
         "driver": 100 * (time.process_time() - driver) / wall,
     }
+
+
+# -- argparse types ---------------------------------------------------------------------------
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer >= 0."""
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 0")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a number > 0."""
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number > 0")
+    return value

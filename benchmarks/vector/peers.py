@@ -57,6 +57,8 @@ from benchmarks.common import (
     RESULTS,
     Column,
     header,
+    non_negative_int,
+    positive_int,
     pyplot,
     save_figure,
     settings,
@@ -109,22 +111,6 @@ class Backend:
 
 
 # -- options --------------------------------------------------------------------------------
-
-
-def positive_int(text: str) -> int:
-    """An argparse type: an integer >= 1."""
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
-    return value
-
-
-def non_negative_int(text: str) -> int:
-    """An argparse type: an integer >= 0."""
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 0")
-    return value
 
 
 def config_value(text: str) -> Any:

@@ -85,12 +85,16 @@ from benchmarks.common import (
     RESULTS,
     Column,
     header,
+    non_negative_int,
+    positive_float,
+    positive_int,
     pyplot,
     save_figure,
     settings,
     table,
     write_json,
 )
+from benchmarks.vector.throughput_timing import start_ray
 from chronogym.sizing import StepModel, fit_line, fit_overhead, synthetic_step_s, timed_loop
 
 DEFAULT_OUT = RESULTS / "scaling.json"
@@ -104,27 +108,6 @@ RAY_SETTLE_S = 2.0
 
 
 # -- options --------------------------------------------------------------------------------
-
-
-def positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
-    return value
-
-
-def non_negative_int(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 0")
-    return value
-
-
-def positive_float(text: str) -> float:
-    value = float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a number > 0")
-    return value
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -673,28 +656,6 @@ def plot(runs: list[dict[str, Any]], path: Path) -> None:
 # -- main ---------------------------------------------------------------------------------
 
 
-def start_local_ray(num_cpus: int) -> None:
-    """One local Ray for the local paths, its workers at chronogym's nice value."""
-    import ray
-
-    from chronogym.ray_runtime import WORKER_NICENESS, worker_niceness_env
-
-    extra = worker_niceness_env(WORKER_NICENESS)
-    os.environ.update(extra)
-    try:
-        ray.init(
-            address="local",
-            num_cpus=num_cpus,
-            include_dashboard=False,
-            log_to_driver=False,
-            logging_level="ERROR",
-        )
-    finally:
-        for key in extra:
-            os.environ.pop(key, None)
-    time.sleep(RAY_SETTLE_S)
-
-
 @contextlib.contextmanager
 def multinode_cluster(nodes: int, cpus: int) -> Iterator[str]:
     """A loopback cluster whose head has no CPUs (every worker on another node): its address."""
@@ -726,7 +687,7 @@ def main(argv: list[str] | None = None) -> int:
     record["sleep_ms"] = sleep_calibration(args.step_ms, min(args.seconds, 1.0))
     print(f"sleep calibration (ms per step, in process): {record['sleep_ms']}")
     straggler_rows: list[dict[str, Any]] = []
-    start_local_ray(args.ray_cpus)
+    start_ray(args.ray_cpus)
     try:
         prime(args.paths, args, None)
         sweep(args.paths, args, None, runs, starts, failures)

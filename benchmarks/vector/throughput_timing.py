@@ -183,9 +183,10 @@ def time_async_env(
         env.recv()  # drain what is still in flight
 
 
-def start_ray() -> None:
-    """One local Ray cluster for the whole run, its workers at chronogym's nice value (0), as
-    ``chronogym.ray_runtime.ensure_ray`` starts one; RayVectorEnv then reuses it."""
+def start_ray(num_cpus: int | None = None) -> None:
+    """One local Ray cluster for the whole run (``num_cpus``: default this machine's), its
+    workers at chronogym's nice value (0), as ``chronogym.ray_runtime.ensure_ray`` starts
+    one; RayVectorEnv then reuses it."""
     import ray
 
     extra = worker_niceness_env(WORKER_NICENESS)
@@ -193,7 +194,7 @@ def start_ray() -> None:
     try:
         ray.init(
             address="local",
-            num_cpus=os.cpu_count(),
+            num_cpus=num_cpus or os.cpu_count(),
             include_dashboard=False,
             log_to_driver=False,
             logging_level="ERROR",
