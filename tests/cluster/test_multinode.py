@@ -134,7 +134,8 @@ def test_relayed_workers_survive_a_kill_and_a_lost_relay(cluster):
         vec.step(actions)  # the replacement steps (through a relay or a socket of this node)
         assert vec._backend.relayed()[victim] or vec._backend.connected()[victim]
 
-        node, relay = next(iter(relays.by_node.items()))
+        node = next(iter(relays.node_of.values()))  # a relay that still serves a worker
+        relay = relays.by_node[node]
         served = [w for w, n in relays.node_of.items() if n == node]
         ray.kill(relay)
         with pytest.raises(ray.exceptions.RayActorError):  # wait until it is gone

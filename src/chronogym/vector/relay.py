@@ -34,8 +34,10 @@ from typing import Any
 
 from chronogym.vector.wire_format import ANSWER, REQUEST, fill
 
-#: What a relay returns per worker: (worker, True, the answer's bytes) or (worker, False, why).
-RelayAnswer = tuple[int, bool, Any]
+#: What a relay returns per worker: (worker, ANSWERED, the answer's bytes), or (worker, LOST
+#: or SILENT, why): its socket failed, or it did not answer within ``step_timeout``.
+RelayAnswer = tuple[int, str, Any]
+ANSWERED, LOST, SILENT = "answered", "lost", "silent"
 
 
 class NodeRelay:
@@ -89,25 +91,25 @@ class NodeRelay:
 
     def step(self, requests: list[tuple[int, bytes, bool]]) -> list[RelayAnswer]:
         """Send each worker its action bytes, then read every answer (raw bytes)."""
-        lost: dict[int, str] = {}
+        failed: dict[int, RelayAnswer] = {}
         for worker, data, timed in requests:
             sock = self.socks.get(worker)
             if sock is None:
-                lost[worker] = "the relay holds no socket to this worker"
+                failed[worker] = (worker, LOST, "the relay holds no socket to this worker")
                 continue
             try:
                 sock.sendall(REQUEST.pack(len(data), timed) + data)
             except OSError as error:
-                lost[worker] = self._lost(worker, error)
+                failed[worker] = self._failed(worker, error)
         answers: list[RelayAnswer] = []
         for worker, _, _ in requests:
-            if worker in lost:
-                answers.append((worker, False, lost[worker]))
+            if worker in failed:
+                answers.append(failed[worker])
                 continue
             try:
-                answers.append((worker, True, self._read(worker)))
+                answers.append((worker, ANSWERED, self._read(worker)))
             except (OSError, EOFError) as error:
-                answers.append((worker, False, self._lost(worker, error)))
+                answers.append(self._failed(worker, error))
         return answers
 
     def _read(self, worker: int) -> bytes:
@@ -123,11 +125,13 @@ class NodeRelay:
         fill(sock, view, got, total)
         return bytes(view[:total])
 
-    def _lost(self, worker: int, error: BaseException) -> str:
+    def _failed(self, worker: int, error: BaseException) -> RelayAnswer:
         self.disconnect(worker)
         if isinstance(error, TimeoutError):
-            return f"no answer within step_timeout={self.step_timeout} s (through its node's relay)"
-        return f"worker {worker}'s socket on its node failed: {type(error).__name__}: {error}"
+            why = f"no answer within step_timeout={self.step_timeout} s (through its node's relay)"
+            return worker, SILENT, why
+        why = f"worker {worker}'s socket on its node failed: {type(error).__name__}: {error}"
+        return worker, LOST, why
 
     def shutdown(self) -> None:
         for worker in list(self.socks):
@@ -141,7 +145,7 @@ class RelayCall:
 
     node: str
     ref: Any = None  # the ObjectRef of NodeRelay.step
-    answers: dict[int, tuple[bool, Any]] | None = None  # worker -> (ok, bytes or why)
+    answers: dict[int, tuple[str, Any]] | None = None  # worker -> (ANSWERED..., bytes or why)
     failure: str | None = None  # the call itself failed (the relay or its node died)
 
 
@@ -236,7 +240,7 @@ class Relays:
             call.failure = f"the relay of node {call.node} failed: {type(error).__name__}: {error}"
             self.drop_node(call.node)
             return
-        call.answers = {worker: (ok, value) for worker, ok, value in answers}
+        call.answers = {worker: (status, value) for worker, status, value in answers}
 
     def drop_node(self, node: str) -> None:
         """Forget a dead relay (and its node's workers: they are replaced)."""

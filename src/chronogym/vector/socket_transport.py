@@ -50,7 +50,7 @@ from chronogym.validation import check_number
 from chronogym.vector.actor_transport import ActorBackend, ActorGroup
 from chronogym.vector.backend import Outcome, gather_split
 from chronogym.vector.group import EnvGroup
-from chronogym.vector.relay import RelayHandle, Relays
+from chronogym.vector.relay import ANSWERED, LOST, SILENT, RelayHandle, Relays
 from chronogym.vector.wire_format import (
     ANSWER,
     REQUEST,
@@ -427,21 +427,24 @@ class SocketBackend(ActorBackend):
             timeout = None if self.step_timeout is None else self.step_timeout + RELAY_MARGIN_S
             self._relays.resolve(handle.call, timeout)
             w = handle.worker
+            answers = handle.call.answers or {}
             if handle.call.failure is not None:
-                handle.outcome = self._lost_relayed(w, handle.call.failure)
+                relayed: tuple[str, Any] = (LOST, handle.call.failure)
             else:
-                ok, value = handle.call.answers.get(w, (False, "no answer from the relay"))  # type: ignore[union-attr]
-                if ok:
-                    status, *sizes = ANSWER.unpack_from(value)
-                    handle.outcome = decode_answer(status, sizes, memoryview(value))
-                else:
-                    handle.outcome = self._lost_relayed(w, value)
+                relayed = answers.get(w, (LOST, "no answer from the relay"))
+            kind, value = relayed
+            if kind == ANSWERED:
+                status, *sizes = ANSWER.unpack_from(value)
+                handle.outcome = decode_answer(status, sizes, memoryview(value))
+            else:
+                handle.outcome = self._lost_relayed(w, value, silent=kind == SILENT)
         return handle.outcome
 
-    def _lost_relayed(self, w: int, why: str) -> Outcome:
-        """A relayed worker's step failed: the worker is lost (Ray's reason, when it has one)."""
+    def _lost_relayed(self, w: int, why: str, silent: bool) -> Outcome:
+        """A relayed worker's step failed: the worker is lost (with Ray's reason, unless it is
+        silent: a hung worker would not answer Ray's probe either)."""
         self._disconnect(w)
-        if "step_timeout" in why:
+        if silent:
             return Outcome(False, None, why, lost=True)
         return Outcome(False, None, f"{self._death_cause(w)}\n({why})", lost=True)
 
