@@ -79,6 +79,22 @@ BAD_INPUTS: dict[str, tuple[list[str], str]] = {
         ["train", "quadruped", "--minutes", "1", "--eval-episodes", "-1"],
         "--eval-episodes=-1: expected an integer >= 0",
     ),
+    "--check-walking with --command": (
+        ["play", "quadruped", "x.pt", "--check-walking", "--command", "1", "0", "0"],
+        "--check-walking with --command: the walking criterion runs its own commands",
+    ),
+    "--check-walking with --steps and --seed": (
+        ["play", "quadruped", "x.pt", "--check-walking", "--steps", "50", "--seed", "2"],
+        "--check-walking with --steps, --seed:",
+    ),
+    "--traces not .npz": (
+        ["play", "quadruped", "x.pt", "--traces", "t.csv"],
+        "--traces=t.csv: expected a .npz path",
+    ),
+    "--step-response not .png": (
+        ["play", "quadruped", "x.pt", "--step-response", "s.pdf"],
+        "--step-response=s.pdf: expected a .png path",
+    ),
     "--friction LO > HI": (
         ["play", "quadruped", "x.pt", "--friction", "1.0", "0.5"],
         "--friction 1 0.5: expected 0 < LO <= HI",

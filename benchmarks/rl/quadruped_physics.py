@@ -174,13 +174,15 @@ def policy_across_steps(checkpoint: Path, rows: list[Row]) -> list[dict]:
             episodes=criterion.episodes,
             seed=criterion.seed,
             progress=False,
+            switch=criterion.switch,
         )
-        summary = summarize(episodes)
+        summary = summarize(episodes, criterion)
         env.close()
         results.append({
             "dt": row.dt, "k": row.k,
-            "walks": all(criterion.passes(r) for r in summary),
-            "commands_passed": sum(criterion.passes(r) for r in summary),
+            "walks": all(r["v2"] for r in summary),
+            "walks_v1": all(r["v1"] for r in summary if r["v1"] is not None),
+            "commands_passed": sum(r["v2"] for r in summary),
             "min_survival": min(r["survival"] for r in summary),
             "worst_x_mse": max(r["x_vel_mse"] for r in summary),
             "worst_y_mse": max(r["y_vel_mse"] for r in summary),

@@ -9,6 +9,8 @@ summary and ``rl_scaling.png``.
     python -m benchmarks.rl.rl_scaling --full           # 30 min per configuration
     python -m benchmarks.rl.rl_scaling --minutes 5 --configs ray-16 serial-16
     python -m benchmarks.rl.rl_scaling --engine chrono --resume runs/go1/best.pt --finetune
+    python -m benchmarks.rl.rl_scaling --engine chrono --minutes 40 --configs ray-16 serial-16 \
+        --save-interval 20 --check-walking --pychrono-commit SHA   # from scratch, time to walk
 
 Configuration names are ``<backend>-<n_env>``; the serial backend steps its envs one after
 another in the training process (the paper's "no Ray" baseline, same env code).
@@ -17,6 +19,13 @@ another in the training process (the paper's "no Ray" baseline, same env code).
 starts every configuration from a checkpoint (e.g. a MuJoCo-trained ``best.pt``) instead of
 from scratch, with ``--finetune`` under the paper's conservative PPO settings. Checkpoints
 are not scored for ``best.pt`` here (``eval_episodes=0``): the budget is all training.
+
+``--check-walking`` then judges each configuration's checkpoints (one every ``--save-interval``
+iterations) in order, in the same engine, by the walking criteria v2 and v1 (as
+``time_to_walk.py`` does) until one walks by each: the wall-clock minutes and env steps to
+walk of every configuration, and the ratio of each to the first configuration's, go into the
+JSON, and a dotted line marks each on the figure. ``--pychrono-commit`` records the commit
+PyChrono was built from in the machine record.
 """
 
 from __future__ import annotations
@@ -110,7 +119,10 @@ def plot(summaries: list[dict], path: Path, title: str) -> None:
         for axis, (key, _) in zip(axes, panels, strict=True):
             window = 5 if key == "mean_reward" else 30  # MSEs: a few episodes per iteration
             values = smoothed([row[key] for row in rows], window)
-            axis.plot(minutes_axis, values, label=summary["config"])
+            (line,) = axis.plot(minutes_axis, values, label=summary["config"])
+            walked = summary.get("minutes_to_walk_v2")
+            if walked is not None:  # --check-walking: the first checkpoint that walks (v2)
+                axis.axvline(walked, color=line.get_color(), ls=":", lw=1)
     for axis, (key, label) in zip(axes, panels, strict=True):
         axis.set_xlabel("wall-clock time (min)")
         axis.set_ylabel(label)
@@ -189,6 +201,37 @@ def run_configs(
     return summaries
 
 
+def time_to_walk(summaries: list[dict], runs: Path, engine: str) -> None:
+    """Judge each configuration's checkpoints in order by v2 and v1 in ``engine``; add the
+    minutes and env steps to walk by each (None: not by the end) to its summary, and the
+    ratio of its minutes to the first configuration's."""
+    import gymnasium as gym
+
+    from benchmarks.rl.time_to_walk import evaluate_run
+    from chronogym.tasks.quadruped.engines import ENV_IDS, env_kwargs_for
+    from chronogym.tasks.quadruped.walking import WalkingCriterion, WalkingCriterionV1
+
+    kwargs = env_kwargs_for("rigid", {}, engine)
+    for summary in summaries:
+        run = runs / summary["config"]
+        rows, ends, _ = evaluate_run(
+            run,
+            [WalkingCriterion(), WalkingCriterionV1()],
+            lambda: gym.make(ENV_IDS[engine], **kwargs),
+        )
+        for suffix, key in (("_v2", "v2_walks"), ("_v1", "walks")):
+            walked = [r for r in rows if r[key]]
+            summary[f"minutes_to_walk{suffix}"] = walked[0]["wall_time"] / 60 if walked else None
+            summary[f"env_steps_to_walk{suffix}"] = walked[0]["env_steps"] if walked else None
+        summary["checked"] = [{k: v for k, v in r.items() if k != "run"} for r in rows]
+        summary["last"] = ends["last"]
+    first = summaries[0]
+    for summary in summaries:
+        for suffix in ("_v2", "_v1"):
+            mine, base = summary[f"minutes_to_walk{suffix}"], first[f"minutes_to_walk{suffix}"]
+            summary[f"time_to_walk_ratio{suffix}"] = mine / base if mine and base else None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=None, help="budget per configuration")
@@ -196,6 +239,13 @@ def main() -> None:
     parser.add_argument("--engine", choices=sorted(ENGINE_FOLDERS), default="mujoco")
     parser.add_argument("--resume", type=Path, help="checkpoint to start from (default: scratch)")
     parser.add_argument("--finetune", action="store_true", help="the paper's conservative PPO")
+    parser.add_argument("--save-interval", type=int, help="iterations between checkpoints")
+    parser.add_argument(
+        "--check-walking",
+        action="store_true",
+        help="then find each configuration's first walking checkpoint (v2, v1)",
+    )
+    parser.add_argument("--pychrono-commit", help="the commit PyChrono was built from (recorded)")
     add_run_flags(parser, DEFAULT_CONFIGS, None, None)
     args = parser.parse_args()
     default_out, default_runs = ENGINE_FOLDERS[args.engine]
@@ -205,6 +255,8 @@ def main() -> None:
     check_run_flags(parser, args, minutes)
     if args.resume is not None and not args.resume.is_file():
         parser.error(f"--resume={args.resume}: no such checkpoint file")
+    if args.save_interval is not None and args.save_interval < 1:
+        parser.error(f"--save-interval={args.save_interval}: expected an integer >= 1")
     if args.finetune and args.resume is None:
         parser.error("--finetune: expected --resume CKPT too (fine-tuning needs a policy)")
     try:
@@ -214,18 +266,34 @@ def main() -> None:
     except (ValueError, ImportError) as error:
         parser.error(f"--engine {args.engine}: {error}")
     start = f"fine-tuned from {args.resume}" if args.resume else "from scratch"
+    extra: dict[str, Any] = {}
+    if args.save_interval is not None:
+        from chronogym.tasks.quadruped.training import quadruped_train_config
+
+        extra["train_cfg"] = quadruped_train_config(save_interval=args.save_interval)
     summaries = run_configs(
         args, minutes, f"{minutes:g} min, {start}", engine=args.engine, resume=args.resume,
-        finetune=args.finetune,
+        finetune=args.finetune, **extra,
     )  # fmt: skip
+    if args.check_walking:
+        time_to_walk(summaries, args.runs, args.engine)
+        for s in summaries:
+            print(f"{s['config']}: walks by v2 after "
+                  f"{fmt_minutes(s['minutes_to_walk_v2'])}, by v1 after "
+                  f"{fmt_minutes(s['minutes_to_walk_v1'])}")  # fmt: skip
     title = (
         f"Go1 velocity tracking in {args.engine}, PPO [512, 256, 128], {start}, "
         f"{minutes:g} min per configuration, {os.cpu_count()} CPUs"
     )
     write_results(
         summaries, args.out, "rl_scaling", title, minutes_per_config=minutes, seed=args.seed,
-        engine=args.engine, start=start,
+        engine=args.engine, start=start, save_interval=args.save_interval,
+        pychrono_commit=args.pychrono_commit,
     )  # fmt: skip
+
+
+def fmt_minutes(value: float | None) -> str:
+    return "- (not by the end)" if value is None else f"{value:.1f} min"
 
 
 if __name__ == "__main__":

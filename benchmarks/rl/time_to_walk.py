@@ -3,18 +3,23 @@
 Each configuration trains the Go1 from scratch, once per seed, for ``--env-steps`` (or
 ``--minutes``), saving a checkpoint every ``--save-interval`` iterations (50: every 76,800
 env steps at 32 envs x 48 steps). After training, each run's checkpoints are checked in order
-with the walking criterion of ``chronogym play``'s standard commands (``WalkingCriterion``:
-5 episodes per command with fixed seeds, survival 100 %, x- and y-velocity MSE <= 0.01 (m/s)²
-for every command) until the first that passes; its env steps (from the run's
-``progress.csv``) are the run's time-to-walk, with the minutes it took on this machine beside
-them (minutes differ ~1.5x between machines of one kind; env steps do not). The run's
-``best.pt`` (kept during training from a smaller evaluation at each save point) and its last
-checkpoint are then checked with the whole criterion too.
+by both walking criteria, from one set of episodes (``chronogym.tasks.quadruped.walking``):
+v2 (``WalkingCriterion``: per command, 5 episodes from rest with fixed seeds, survival, rise
+time t90 <= 1 s, steady-state x/y MSE <= 0.01 (m/s)² after the first second, yaw-rate MSE
+<= 0.04, and a 0.5 -> 1.0 m/s command switch) and v1 (``WalkingCriterionV1``: survival and
+whole-episode x/y MSE <= 0.01), until a checkpoint has passed each. Its env steps (from the
+run's ``progress.csv``) are the run's time-to-walk by that criterion, with the minutes it took
+on this machine beside them (minutes differ ~1.5x between machines of one kind; env steps do
+not). The run's ``best.pt`` (kept during training by the evaluation of each save point) and
+its last checkpoint are then judged by both too.
 
 Writes ``time_to_walk.json`` (per configuration: settings, PPO settings, the median env
-steps; per run: env steps and minutes to walk, best and last checkpoint), ``time_to_walk.csv``
-(every checkpoint checked) and ``time_to_walk.png`` (commands passed and worst MSE against
-env steps, one line per run).
+steps by v1 and v2; per run: env steps and minutes to walk by each, best and last
+checkpoint), ``time_to_walk.csv`` (every checkpoint checked, both verdicts),
+``time_to_walk.png`` (groups passed and v2's worst ratio against env steps, one line per run)
+and ``step_response.png`` (the first run's first checkpoint that walks by v2: vx, vy and the
+yaw rate against time for every command). Each run's folder gets that checkpoint's
+``step_response.npz`` (``load_traces``). Runs kept from before v2 carry v1's verdict only.
 
     python -m benchmarks.rl.time_to_walk                      # the default, seeds 0-4
     python -m benchmarks.rl.time_to_walk --configs ray:32:0:48+ent1e-3 --seeds 1 2 --keep
@@ -38,10 +43,12 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import math
 import shutil
 import statistics
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +57,8 @@ import gymnasium as gym
 import chronogym  # noqa: F401
 from benchmarks.common import RESULTS, header, pyplot, save_figure, settings, write_json
 from benchmarks.rl.train_throughput import parse_config
+from chronogym.tasks.quadruped.step_response import plot_step_response
+from chronogym.tasks.quadruped.walking import save_traces
 
 OUT = RESULTS / "time_to_walk"
 #: Every seed of the default should walk within this many env steps (median <= 1.2 M).
@@ -155,54 +164,88 @@ def checkpoints(run: Path) -> list[tuple[int, float, int, Path]]:
     return sorted(found)
 
 
-def check(env: Any, path: Path, criterion: Any) -> tuple[bool, int, float]:
-    """Whether the checkpoint at ``path`` walks, the commands it passes in order, and the worst
-    x/y MSE over the commands checked (stopping at the first that fails)."""
+def check(envs: list[Any], path: Path, criteria: list[Any]) -> list[Any]:
+    """The verdicts of ``criteria`` (v2, v1) on the checkpoint at ``path``, from one set of
+    episodes run group by group in step in ``envs`` until every criterion has failed a group."""
     from chronogym.rl.checkpoint import load_policy
-    from chronogym.tasks.quadruped.evaluation import check_walking
+    from chronogym.tasks.quadruped.evaluation import check_walking_by
 
-    walks, summary = check_walking(env, load_policy(path), criterion)
-    passed = sum(criterion.passes(r) for r in summary)
-    worst = max(max(r["x_vel_mse"], r["y_vel_mse"]) for r in summary)
-    return walks, passed, worst
+    return check_walking_by(envs[0], load_policy(path), criteria, envs=envs)
 
 
-def evaluate_run(run: Path, criterion: Any, config: str) -> tuple[list[dict[str, Any]], dict]:
-    """Check the run's checkpoints in order until one walks, on the physics step the run
-    trained with (one row per checkpoint); then its ``best.pt`` and last checkpoint."""
-    from chronogym.rl.best import read_best
+def verdict_columns(v2: Any, v1: Any) -> dict[str, Any]:
+    """A checkpoint's ``time_to_walk.csv`` values: v1's (``commands_passed``, ``worst_mse``
+    of the whole-episode MSEs, ``walks``) and v2's (``v2_*``, with its first failure)."""
+    worst_v1 = max((max(c.x_mse, c.y_mse) for c in v1.checks), default=math.inf)
+    return {
+        "commands_passed": v1.commands_passed, "worst_mse": worst_v1, "walks": v1.walks,
+        "v2_passed": v2.commands_passed, "v2_worst_ratio": v2.worst_ratio, "v2_walks": v2.walks,
+        "v2_first_failure": (v2.failures or [""])[0],
+    }  # fmt: skip
+
+
+def ends_record(envs: list[Any], path: Path, criteria: list[Any]) -> dict[str, Any]:
+    """Both verdicts on one checkpoint, for the JSON (``walks`` is v1's, as before v2)."""
+    v2, v1 = check(envs, path, criteria)
+    return {"walks": v1.walks, "v2_walks": v2.walks, "v2_failures": v2.failures[:3]}
+
+
+def config_env(config: str) -> Callable[[], Any]:
+    """Makes the MuJoCo Go1 env on the physics step ``config`` trained with, as ``play`` does."""
     from chronogym.tasks.quadruped.engines import ENV_ID
 
-    env = gym.make(ENV_ID, **parse_config(split_config(config)[0]).task_kwargs())
+    kwargs = parse_config(split_config(config)[0]).task_kwargs()
+    return lambda: gym.make(ENV_ID, **kwargs)
+
+
+def evaluate_run(
+    run: Path, criteria: list[Any], make_env: Callable[[], Any]
+) -> tuple[list[dict[str, Any]], dict, Any]:
+    """Check the run's checkpoints in order until one walks by each criterion (v2, v1), in
+    envs from ``make_env`` (one row per checkpoint); then its ``best.pt`` and last
+    checkpoint. Also returns the v2 verdict (with its traces) of the first checkpoint that
+    walks by v2, else of the last one checked."""
+    from chronogym.rl.best import read_best
+
+    envs = [make_env() for _ in range(criteria[0].episodes)]
     rows = []
     found = checkpoints(run)
+    walked = {"v1": False, "v2": False}
+    shown = None
     try:
         for it, wall, steps, path in found:
-            walks, passed, worst = check(env, path, criterion)
+            v2, v1 = check(envs, path, criteria)
             rows.append({
                 "run": run.name, "iteration": it, "wall_time": wall, "env_steps": steps,
-                "commands_passed": passed, "worst_mse": worst, "walks": walks,
+                **verdict_columns(v2, v1),
             })  # fmt: skip
-            print(f"  {run.name} it {it:5d} {steps / 1e6:5.2f} M steps: {passed} commands pass"
-                  f"{' -> WALKS' if walks else ''}", flush=True)  # fmt: skip
-            if walks:
+            if not walked["v2"]:
+                shown = v2
+            walked = {"v1": walked["v1"] or v1.walks, "v2": walked["v2"] or v2.walks}
+            print(f"  {run.name} it {it:5d} {steps / 1e6:5.2f} M steps: v2 {v2.describe()}; "
+                  f"v1 {v1.commands_passed}/{v1.groups}"
+                  f"{' -> WALKS (v2)' if v2.walks else ''}{' -> WALKS (v1)' if v1.walks else ''}",
+                  flush=True)  # fmt: skip
+            if all(walked.values()):
                 break
         ends = {"last": {"iteration": found[-1][0], "env_steps": found[-1][2]}}
-        ends["last"]["walks"] = check(env, found[-1][3], criterion)[0]
+        ends["last"].update(ends_record(envs, found[-1][3], criteria))
         best = read_best(run)
         if best is not None:
-            ends["best"] = {**best, "walks": check(env, run / "best.pt", criterion)[0]}
+            ends["best"] = {**best, **ends_record(envs, run / "best.pt", criteria)}
     finally:
-        env.close()
-    return rows, ends
+        for env in envs:
+            env.close()
+    return rows, ends, shown
 
 
 def plot(
     rows: list[dict[str, Any]], summary: list[dict[str, Any]], criterion: Any, path: Path
 ) -> None:
-    """Commands passed and worst MSE against env steps (a line per run; colour: configuration,
-    style: seed), and each configuration's env steps to walk (a dot per seed; an open triangle
-    at the last checkpoint checked for a run that did not walk)."""
+    """Groups passed in order and v2's worst ratio against env steps (a line per run; colour:
+    configuration, style: seed; v1's groups passed dotted), and each configuration's env
+    steps to walk (a dot per seed: filled v2, open v1; a triangle at the last checkpoint
+    checked for a run that did not walk by v2)."""
     fig, (left, middle, right) = pyplot().subplots(
         1, 3, figsize=(17, 4.6), gridspec_kw={"width_ratios": [1, 1, 1.1]}
     )
@@ -214,78 +257,96 @@ def plot(
         steps = [r["env_steps"] / 1e6 for r in mine]
         color = colors(configs.index(mine[0]["config"]) % 10)
         style = styles[int(mine[0]["seed"]) % len(styles)]
-        for axis, key in ((left, "commands_passed"), (middle, "worst_mse")):
-            axis.plot(steps, [r[key] for r in mine], marker=".", ms=3, lw=1, color=color, ls=style)
-    left.set_ylabel(f"commands passed in order (of {len(criterion.commands)})")
-    middle.set_ylabel("worst episode-mean x/y velocity MSE (m/s)²")
-    middle.axhline(criterion.max_x_mse, color="k", lw=0.8, ls="--")
+        left.plot(steps, [r["commands_passed"] for r in mine], lw=0.6, color=color, ls=":")
+        if all("v2_passed" in r for r in mine):
+            left.plot(steps, [r["v2_passed"] for r in mine], marker=".", ms=3, lw=1,
+                      color=color, ls=style)  # fmt: skip
+            middle.plot(steps, [r["v2_worst_ratio"] for r in mine], marker=".", ms=3, lw=1,
+                        color=color, ls=style)  # fmt: skip
+    left.set_ylabel(f"groups passed in order (v2 of {len(criterion.groups())}; v1 dotted)")
+    middle.set_ylabel("v2: worst clause value / its bound")
+    middle.axhline(1.0, color="k", lw=0.8, ls="--")
     middle.set_yscale("log")
     for axis in (left, middle):
         axis.set_xlabel("env steps since training started (millions)")
         axis.grid(alpha=0.3)
     for y, config in enumerate(configs):
         mine = [s for s in summary if s["config"] == config]
-        walked = [s["env_steps_to_walk"] / 1e6 for s in mine if s["env_steps_to_walk"]]
+        color = colors(y % 10)
+        v1 = [s["env_steps_to_walk"] / 1e6 for s in mine if s["env_steps_to_walk"]]
+        right.scatter(v1, [y + 0.15] * len(v1), facecolors="none", edgecolors=color, zorder=3)
+        scored = [s for s in mine if "env_steps_to_walk_v2" in s]
+        v2 = [s["env_steps_to_walk_v2"] / 1e6 for s in scored if s["env_steps_to_walk_v2"]]
         failed = [
-            (s.get("trained_env_steps") or 0) / 1e6 for s in mine if not s["env_steps_to_walk"]
+            (s.get("trained_env_steps") or 0) / 1e6 for s in scored if not s["env_steps_to_walk_v2"]
         ]
-        right.scatter(walked, [y] * len(walked), color=colors(y % 10), zorder=3)
-        right.scatter(failed, [y] * len(failed), marker=">", facecolors="none",
-                      edgecolors=colors(y % 10), zorder=3)  # fmt: skip
+        right.scatter(v2, [y - 0.15] * len(v2), color=color, zorder=3)
+        right.scatter(failed, [y - 0.15] * len(failed), marker=">", color=color, zorder=3)
     right.axvline(GOAL_ENV_STEPS / 1e6, color="k", lw=0.8, ls="--")
     right.set_yticks(range(len(configs)), [f"{c} ({medians_label(summary, c)})" for c in configs])
     right.invert_yaxis()
     right.yaxis.tick_right()
-    right.set_xlabel("env steps to the first walking checkpoint (millions; > : not by then)")
+    right.set_xlabel("env steps to the first walking checkpoint (M; filled v2, open v1; >: not)")
     right.grid(alpha=0.3, axis="x")
-    fig.suptitle("Go1 time-to-walk: checkpoints checked in order until one walks")
+    fig.suptitle("Go1 time-to-walk: checkpoints checked in order until one walks (v2 and v1)")
     save_figure(fig, path)
 
 
 def medians_label(summary: list[dict[str, Any]], config: str) -> str:
-    """``"walked 4/5"`` for a configuration's runs."""
+    """``"v2 3/5, v1 4/5"`` (``"v1 4/5"`` for runs scored before v2) for a configuration."""
     mine = [s for s in summary if s["config"] == config]
-    return f"walked {sum(bool(s['env_steps_to_walk']) for s in mine)}/{len(mine)}"
+    scored = [s for s in mine if "env_steps_to_walk_v2" in s]
+    v1 = f"v1 {sum(bool(s['env_steps_to_walk']) for s in mine)}/{len(mine)}"
+    if not scored:
+        return v1
+    return f"v2 {sum(bool(s['env_steps_to_walk_v2']) for s in scored)}/{len(scored)}, {v1}"
 
 
 def summarize_run(config: str, seed: int, rows: list[dict[str, Any]], ends: dict, run: Path):
-    """The JSON record of one run."""
-    walked = [r for r in rows if r["walks"]]
+    """The JSON record of one run: env steps, minutes and iteration to walk by v1 (the keys
+    used before v2) and by v2 (``*_v2``)."""
     last = checkpoints(run)[-1]
-    return {
-        "config": config, "seed": seed,
-        "env_steps_to_walk": walked[0]["env_steps"] if walked else None,
-        "minutes_to_walk": walked[0]["wall_time"] / 60 if walked else None,
-        "iteration_to_walk": walked[0]["iteration"] if walked else None,
-        "trained_env_steps": last[2], "trained_min": last[1] / 60, **ends,
-    }  # fmt: skip
+    record: dict[str, Any] = {"config": config, "seed": seed}
+    for suffix, key in (("", "walks"), ("_v2", "v2_walks")):
+        walked = [r for r in rows if r[key]]
+        record[f"env_steps_to_walk{suffix}"] = walked[0]["env_steps"] if walked else None
+        record[f"minutes_to_walk{suffix}"] = walked[0]["wall_time"] / 60 if walked else None
+        record[f"iteration_to_walk{suffix}"] = walked[0]["iteration"] if walked else None
+    return {**record, "trained_env_steps": last[2], "trained_min": last[1] / 60, **ends}
 
 
 def medians(summary: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """Per configuration: runs that walked, median env steps and minutes to walk (a run that
-    never walked counts as longer than any that did; None if that is the median)."""
+    """Per configuration and criterion: runs that walked, median env steps and minutes to
+    walk (a run that never walked counts as longer than any that did; None if that is the
+    median). A run scored before v2 has no v2 verdict and is left out of v2's counts."""
     out = {}
     for config in dict.fromkeys(s["config"] for s in summary):
         mine = [s for s in summary if s["config"] == config]
-        med = {}
-        for key in ("env_steps_to_walk", "minutes_to_walk"):
-            value = statistics.median(math.inf if s[key] is None else s[key] for s in mine)
-            med[key] = None if math.isinf(value) else value
-        walked = sum(s["env_steps_to_walk"] is not None for s in mine)
-        out[config] = {"walked": f"{walked}/{len(mine)}", **med}
-        shown = ", ".join(
-            f"s{s['seed']}: " + ("-" if s["env_steps_to_walk"] is None
-                                 else f"{s['env_steps_to_walk'] / 1e6:.2f} M")
-            for s in mine
-        )  # fmt: skip
-        steps = med["env_steps_to_walk"]
-        print(f"{config:<28} walked {walked}/{len(mine)}; median "
-              f"{'-' if steps is None else f'{steps / 1e6:.2f} M'} env steps; {shown}")  # fmt: skip
+        out[config] = {}
+        for suffix in ("", "_v2"):
+            scored = [s for s in mine if f"env_steps_to_walk{suffix}" in s]
+            med = {}
+            for key in (f"env_steps_to_walk{suffix}", f"minutes_to_walk{suffix}"):
+                values = [math.inf if s[key] is None else s[key] for s in scored]
+                value = statistics.median(values) if values else math.inf
+                med[key] = None if math.isinf(value) else value
+            walked = sum(s[f"env_steps_to_walk{suffix}"] is not None for s in scored)
+            out[config] |= {f"walked{suffix}": f"{walked}/{len(scored)}", **med}
+            shown = ", ".join(
+                f"s{s['seed']}: " + ("-" if s[f"env_steps_to_walk{suffix}"] is None
+                                     else f"{s[f'env_steps_to_walk{suffix}'] / 1e6:.2f} M")
+                for s in scored
+            )  # fmt: skip
+            steps = med[f"env_steps_to_walk{suffix}"]
+            name = "v2" if suffix else "v1"
+            median = "-" if steps is None else f"{steps / 1e6:.2f} M"
+            print(f"{config:<28} {name}: walked {walked}/{len(scored)}; median {median} "
+                  f"env steps; {shown}")  # fmt: skip
     return out
 
 
 def main(argv: list[str] | None = None) -> None:
-    from chronogym.tasks.quadruped.evaluation import WalkingCriterion
+    from chronogym.tasks.quadruped.walking import WalkingCriterion, WalkingCriterionV1
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--configs", nargs="+", default=["ray:32:0:48"])
@@ -316,6 +377,7 @@ def main(argv: list[str] | None = None) -> None:
                      "budget > 0 and an interval >= 1")  # fmt: skip
     try:
         criterion = WalkingCriterion(max_x_mse=args.max_mse, max_y_mse=args.max_mse)
+        v1 = WalkingCriterionV1(max_x_mse=args.max_mse, max_y_mse=args.max_mse)
     except ValueError as error:
         parser.error(f"--max-mse: {error}")
     missing = [str(d) for d in args.merge if not (d / "time_to_walk.json").is_file()]
@@ -328,11 +390,15 @@ def main(argv: list[str] | None = None) -> None:
             train_run(config, seed, budget, args.save_interval, args.runs)
     rows: list[dict[str, Any]] = []
     summary = []
+    responses = []
     for config, seed in runs:
         run = args.runs / run_name(config, seed)
-        checked, ends = evaluate_run(run, criterion, config)
+        checked, ends, shown = evaluate_run(run, [criterion, v1], config_env(config))
         rows += [{"config": config, "seed": seed, **r} for r in checked]
         summary.append(summarize_run(config, seed, checked, ends, run))
+        if shown is not None:
+            save_traces(run / "step_response.npz", shown.traces)
+            responses.append((run, shown))
     sources = ([args.out] if args.keep else []) + list(args.merge)
     earlier = load_earlier(sources, set(runs))
     rows = earlier["rows"] + rows
@@ -341,16 +407,22 @@ def main(argv: list[str] | None = None) -> None:
     per_config = medians(summary)
     args.out.mkdir(parents=True, exist_ok=True)
     with (args.out / "time_to_walk.csv").open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["config"])
+        fields = list(dict.fromkeys(key for row in rows for key in row)) or ["config"]
+        writer = csv.DictWriter(handle, fieldnames=fields, restval="")
         writer.writeheader()
         writer.writerows(rows)
     plot(rows, summary, criterion, args.out / "time_to_walk.png")
+    if responses:  # the first run's first checkpoint that walks by v2 (else its last checked)
+        run, verdict = responses[0]
+        plot_step_response(verdict.traces, args.out / "step_response.png", criterion, verdict,
+                           f"{run.name}: {verdict.describe()}"[:110])  # fmt: skip
     ran = {c: merged_settings(args, c, earlier["settings"].get(c)) for c in args.configs if runs}
     record = {
         **header("time_to_walk", "torch", "rsl-rl-lib"),
         "settings": {**earlier["settings"], **ran},
-        "criterion": {"max_x_mse": criterion.max_x_mse, "max_y_mse": criterion.max_y_mse,
-                      "episodes": criterion.episodes, "commands": criterion.commands},
+        "criterion": {"v1": dataclasses.asdict(v1), "v2": dataclasses.asdict(criterion),
+                      "note": "walks/env_steps_to_walk: v1 (whole-episode MSE); *_v2: v2; "
+                              "runs without *_v2 keys were scored before v2 existed"},
         "configs": per_config,
         "runs": summary,
     }  # fmt: skip
@@ -419,11 +491,15 @@ def load_earlier(sources: list[Path], running: set[tuple[str, int]]) -> dict[str
 def as_numbers(row: dict[str, str]) -> dict[str, Any]:
     """A ``time_to_walk.csv`` row with its numbers read back."""
     out: dict[str, Any] = dict(row)
-    for key in ("seed", "iteration", "env_steps", "commands_passed"):
-        out[key] = int(row[key])
-    for key in ("wall_time", "worst_mse"):
-        out[key] = float(row[key])
-    out["walks"] = row["walks"] == "True"
+    for key in ("seed", "iteration", "env_steps", "commands_passed", "v2_passed"):
+        if row.get(key) not in (None, ""):
+            out[key] = int(row[key])
+    for key in ("wall_time", "worst_mse", "v2_worst_ratio"):
+        if row.get(key) not in (None, ""):
+            out[key] = float(row[key])
+    for key in ("walks", "v2_walks"):
+        if row.get(key) not in (None, ""):
+            out[key] = row[key] == "True"
     return out
 
 

@@ -302,6 +302,29 @@ def cmd_train(args: argparse.Namespace) -> int:
 def cmd_play(args: argparse.Namespace) -> int:
     """Roll a trained policy out for a set of commands; print tracking errors, save a video."""
     randomization = play_randomization(args)
+    commands = [tuple(c) for c in args.command] if args.command else None
+    if args.check_walking:
+        given = [
+            flag
+            for flag, value, default in (
+                ("--command", commands, None),
+                ("--steps", args.steps, None),
+                ("--episodes", args.episodes, 1),
+                ("--seed", args.seed, 0),
+            )
+            if value != default
+        ]
+        if given:
+            raise UsageError(
+                f"--check-walking with {', '.join(given)}: the walking criterion runs its own "
+                "commands, episodes, seeds and 20 s episodes; leave them out"
+            )
+    for flag, path, suffix in (
+        ("--traces", args.traces, ".npz"),
+        ("--step-response", args.step_response, ".png"),
+    ):
+        if path and os.path.splitext(path)[1].lower() != suffix:
+            raise UsageError(f"{flag}={path}: expected a {suffix} path")
     if not os.path.exists(args.checkpoint):
         raise UsageError(f"checkpoint {args.checkpoint!r}: no such file")
     if args.video and os.path.splitext(args.video)[1].lower() not in (".mp4", ".gif", ".png"):
@@ -313,7 +336,6 @@ def cmd_play(args: argparse.Namespace) -> int:
             check_can_render()
         except RuntimeError as error:  # no GL library: a setup the user can change
             raise UsageError(f"--video={args.video}: {first_line(error)}") from error
-    commands = [tuple(c) for c in args.command] if args.command else None
     rows = play_quadruped(
         args.checkpoint,
         commands=commands,
@@ -325,13 +347,29 @@ def cmd_play(args: argparse.Namespace) -> int:
         video_seconds=args.video_seconds,
         engine=args.engine,
         randomization=randomization,
+        check_walking=args.check_walking,
+        traces=args.traces,
+        step_response=args.step_response,
     )
     if randomization is not None:
         print(f"randomization: {describe_randomization(randomization)}")
     print(format_summary(rows))
-    if args.video:
-        print(f"video: {args.video}")
+    if args.check_walking:
+        print(walking_verdicts(rows))
+    for what, path in (("video", args.video), ("traces", args.traces),
+                       ("step response", args.step_response)):  # fmt: skip
+        if path:
+            print(f"{what}: {path}")
     return 0
+
+
+def walking_verdicts(rows: list[dict[str, Any]]) -> str:
+    """``play --check-walking``'s verdicts: walks by v2 (else each failed clause on a line of
+    its own) and by v1."""
+    failures = [f"  {row['label']}: {f}" for row in rows for f in row["failures"]]
+    v1 = "yes" if all(row["v1"] for row in rows if row["v1"] is not None) else "no"
+    lines = ["walks by criterion v2: " + ("yes" if not failures else "no, because"), *failures]
+    return "\n".join([*lines, f"walks by criterion v1 (whole-episode MSE): {v1}"])
 
 
 def open_study(url: str, study_name: str, sampler: Any) -> Any:

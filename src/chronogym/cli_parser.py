@@ -282,8 +282,9 @@ def add_train(sub: Any) -> None:
     add_int(
         tr,
         "--eval-episodes",
-        2,
-        "episodes per standard command that score each saved checkpoint for best.pt (0: none)",
+        5,
+        "episodes per group of the walking criterion (its commands and its command switch) "
+        "that judge each saved checkpoint for best.pt; 5 is the criterion's own (0: none)",
         least=0,
     )
     add_ray_options(tr)
@@ -333,6 +334,17 @@ def add_play(sub: Any) -> None:
         metavar=("LO", "HI"),
         help="draw the foot-ground friction of each episode uniformly from [LO, HI] "
         "(default: the model's)",
+    )
+    play.add_argument(
+        "--check-walking",
+        action="store_true",
+        help="run exactly the walking criterion's episodes (its 6 commands and its command "
+        "switch, 5 episodes each, 20 s) and say whether the policy walks, by v2 and by v1",
+    )
+    play.add_argument("--traces", help="save every episode's velocity trace to this .npz")
+    play.add_argument(
+        "--step-response",
+        help="draw vx, vy and the yaw rate against time for every command into this PNG",
     )
     add_quadruped_world(play)
     add_int(play, "--seed", 0, "seed of the episodes", least=0)

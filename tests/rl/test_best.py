@@ -17,15 +17,13 @@ import chronogym  # noqa: F401
 from chronogym.rl.best import BestCheckpoint
 from chronogym.rl.progress import TIMING_COLUMNS
 from chronogym.tasks.quadruped.engines import ENV_ID
-from chronogym.tasks.quadruped.evaluation import (
-    WalkingCriterion,
-    WalkingEvaluator,
-    WalkingScore,
-    run_episode,
-    run_episodes_together,
-    score_walking,
+from chronogym.tasks.quadruped.evaluation import run_episode, run_episodes_together
+from chronogym.tasks.quadruped.training import (
+    quadruped_train_config,
+    train_quadruped,
+    walking_evaluator,
 )
-from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
+from chronogym.tasks.quadruped.walking import CommandCheck, WalkingVerdict
 
 SHORT = {"max_episode_steps": 40}  # short episodes keep the evaluations cheap
 
@@ -37,11 +35,20 @@ class ScriptedScore:
     passed: int
     worst: float
 
+    def verdict(self) -> WalkingVerdict:
+        def check(i):
+            failures = () if i < self.passed else ("steady state: made up",)
+            values = dict(rise_s=None, x_mse=0.0, y_mse=0.0, yaw_mse=None, episode_x_mse=0.0,
+                          episode_y_mse=0.0, ratio=self.worst)  # fmt: skip
+            return CommandCheck(f"c{i}", (0.0, 0.0, 0.0), 1, 1, failures=failures, **values)
+
+        return WalkingVerdict(tuple(check(i) for i in range(self.passed + 1)), 7)
+
     def key(self) -> tuple[float, ...]:
-        return WalkingScore(self.passed, 6, self.worst).key()
+        return self.verdict().key()
 
     def describe(self) -> str:
-        return WalkingScore(self.passed, 6, self.worst).describe()
+        return self.verdict().describe()
 
     def columns(self) -> dict[str, float]:
         return {"passed": self.passed}
@@ -62,7 +69,7 @@ def write_checkpoints(folder, names):
         (folder / name).write_bytes(name.encode())
 
 
-def test_the_best_is_more_commands_passed_then_a_smaller_worst_mse(tmp_path):
+def test_the_best_is_more_groups_passed_then_a_smaller_worst_ratio(tmp_path):
     scores = {
         "model_0.pt": ScriptedScore(0, 0.2),
         "model_1.pt": ScriptedScore(3, 0.05),
@@ -79,7 +86,7 @@ def test_the_best_is_more_commands_passed_then_a_smaller_worst_mse(tmp_path):
     record = json.loads((tmp_path / "best.json").read_text())
     assert record["iteration"] == 3 and record["env_steps"] == 400
     assert record["source"] == "model_3.pt"
-    assert "3/6 commands pass, worst MSE 0.0200" in best.summary()
+    assert "3/7 pass (v2); first failure: c3: steady state: made up" in best.summary()
 
 
 def test_a_resumed_run_keeps_the_best_of_the_earlier_part(tmp_path):
@@ -90,17 +97,6 @@ def test_a_resumed_run_keeps_the_best_of_the_earlier_part(tmp_path):
     resumed.consider(1, 20, tmp_path / "model_1.pt")
     assert (tmp_path / "best.pt").read_bytes() == b"model_0.pt"
     assert json.loads((tmp_path / "best.json").read_text())["iteration"] == 0
-
-
-def test_score_counts_the_commands_passed_in_order():
-    criterion = WalkingCriterion(commands=((0.5, 0, 0), (1.0, 0, 0), (0, 0, 0)))
-
-    def row(survival, x, y=0.0):
-        return {"survival": survival, "x_vel_mse": x, "y_vel_mse": y}
-
-    score = score_walking([row(1.0, 0.005), row(0.8, 0.002), row(1.0, 0.03)], criterion)
-    assert (score.commands_passed, score.worst_mse, score.walks) == (1, 0.03, False)
-    assert score_walking([row(1.0, 0.001)] * 3, criterion).walks
 
 
 def test_episodes_in_step_give_the_results_of_one_at_a_time():
@@ -115,6 +111,10 @@ def test_episodes_in_step_give_the_results_of_one_at_a_time():
         for env in [*envs, single]:
             env.close()
     assert together == alone
+    for a, b in zip(together, alone, strict=True):
+        np.testing.assert_array_equal(a.trace.vx, b.trace.vx)
+        np.testing.assert_array_equal(a.trace.wz, b.trace.wz)
+        np.testing.assert_array_equal(a.trace.commands, b.trace.commands)
 
 
 class ZeroPolicy:
@@ -145,10 +145,11 @@ def test_training_keeps_the_checkpoint_the_criterion_ranks_first(tmp_path):
     evaluated = [r for r in rows if r["eval_commands_passed"] != "nan"]
     assert [int(r["iteration"]) for r in evaluated] == [1, 3, 5]  # the save points
     assert all(float(r["eval_s"]) > 0 for r in evaluated)
-    assert all(math.isnan(float(r["eval_worst_mse"])) for r in rows if r not in evaluated)
+    assert all(math.isnan(float(r["eval_worst_ratio"])) for r in rows if r not in evaluated)
+    assert len({r["eval_worst_ratio"] for r in evaluated}) > 1  # the ranking has a choice
 
     def key(r):
-        return (int(r["eval_commands_passed"]), -float(r["eval_worst_mse"]))
+        return (int(r["eval_commands_passed"]), -float(r["eval_worst_ratio"]))
 
     winner = max(evaluated, key=key)  # max keeps the first of equals, as best.pt does
     record = json.loads((run / "best.json").read_text())
@@ -158,14 +159,15 @@ def test_training_keeps_the_checkpoint_the_criterion_ranks_first(tmp_path):
     assert (run / "best.pt").read_bytes() == source.read_bytes()
     assert result.best.startswith(f"best checkpoint {run / 'best.pt'} = {source.name}")
 
-    # the evaluator sees what `chronogym play` sees: rescoring best.pt gives its row again
-    evaluator = WalkingEvaluator(lambda: gym.make(ENV_ID, **SHORT), WalkingCriterion(episodes=1))
+    # the evaluator sees what `chronogym play` sees: rejudging best.pt gives its row again
+    evaluator = walking_evaluator("mujoco", "rigid", SHORT, 1)
     try:
         again = evaluator(run / "best.pt")
     finally:
         evaluator.close()
+    assert evaluator.criterion.version == "v2" and evaluator.criterion.switch.at_s == 0.4
     assert again.commands_passed == int(winner["eval_commands_passed"])
-    assert again.worst_mse == pytest.approx(float(winner["eval_worst_mse"]), rel=1e-9)
+    assert again.worst_ratio == pytest.approx(float(winner["eval_worst_ratio"]), rel=1e-9)
 
 
 def test_the_same_seed_gives_the_same_rows_evaluations_included(tmp_path):
@@ -177,7 +179,7 @@ def test_the_same_seed_gives_the_same_rows_evaluations_included(tmp_path):
         return [{k: v for k, v in r.items() if k not in timing} for r in read_rows(run)]
 
     a, b = untimed(tmp_path / "a" / "progress.csv"), untimed(tmp_path / "b" / "progress.csv")
-    assert a == b and "eval_worst_mse" in a[0]
+    assert a == b and "eval_worst_ratio" in a[0]
 
 
 def test_eval_episodes_zero_keeps_no_best_and_the_plain_header(tmp_path):

@@ -9,6 +9,8 @@ import sys
 
 import pytest
 
+from chronogym.tasks.quadruped.walking import load_traces
+
 pytest.importorskip("rsl_rl")
 
 CLI = [sys.executable, "-m", "chronogym.cli"]
@@ -36,7 +38,7 @@ def test_train_resume_and_play_on_the_serial_backend(tmp_path):
     assert (out / "latest.pt").is_file() and (out / "model_1.pt").is_file()
     # the last checkpoint was scored on the walking criterion: it is the best so far
     assert f"best checkpoint {out / 'best.pt'} = model_1.pt (iteration 1" in first.stdout
-    assert "commands pass, worst MSE" in first.stdout
+    assert "/7 pass (v2)" in first.stdout
     assert (out / "best.pt").read_bytes() == (out / "model_1.pt").read_bytes()
 
     resumed = run_cli(
@@ -56,6 +58,27 @@ def test_train_resume_and_play_on_the_serial_backend(tmp_path):
     assert "x_mse" in lines[0]
     assert lines[1].split()[0:3] == ["(+0.50,", "+0.00,", "+0.00)"]
     assert lines[2].split()[0:3] == ["(+0.00,", "+0.20,", "+0.00)"]
+    assert lines[0].split()[-2:] == ["v1", "v2"]
+
+    traced = run_cli(
+        "play", "quadruped", str(out / "latest.pt"), "--steps", "15", "--command", "0.5", "0",
+        "0", "--episodes", "2", "--traces", str(tmp_path / "t.npz"),
+        "--step-response", str(tmp_path / "s.png"),
+    )  # fmt: skip
+    assert traced.returncode == 0, traced.stderr[-3000:]
+    assert f"traces: {tmp_path / 't.npz'}" in traced.stdout
+    traces = load_traces(tmp_path / "t.npz")
+    expected = [((0.5, 0.0, 0.0), seed, 15) for seed in (0, 1)]
+    assert [(t.command, t.seed, len(t.vx)) for t in traces] == expected
+    assert (tmp_path / "s.png").read_bytes()[:4] == b"\x89PNG"
+
+    checked = run_cli("play", "quadruped", str(out / "latest.pt"), "--check-walking")
+    assert checked.returncode == 0, checked.stderr[-3000:]
+    table = checked.stdout.strip().splitlines()
+    assert len(table) >= 1 + 7 + 2  # header, 6 commands and the switch, the verdicts
+    assert table[7].split()[0] == "switch" and table[7].split()[-2:] == ["-", "FAIL"]
+    assert "walks by criterion v2: no, because" in table
+    assert table[-1] == "walks by criterion v1 (whole-episode MSE): no"
 
     shaken = run_cli(
         "play", "quadruped", str(out / "best.pt"), "--steps", "15", "--command", "0.5", "0", "0",

@@ -36,7 +36,9 @@ _EXPORTS = {
     "quadruped_train_config": "chronogym.tasks.quadruped.training",
     "evaluate": "chronogym.tasks.quadruped.evaluation",
     "VideoRecorder": "chronogym.video",
-    "WalkingCriterion": "chronogym.tasks.quadruped.evaluation",
+    "WalkingCriterion": "chronogym.tasks.quadruped.walking",
+    "WalkingCriterionV1": "chronogym.tasks.quadruped.walking",
+    "WalkingVerdict": "chronogym.tasks.quadruped.walking",
     "WalkingEvaluator": "chronogym.tasks.quadruped.evaluation",
     "BestCheckpoint": "chronogym.rl.best",
 }
@@ -48,7 +50,9 @@ __all__ = [
     "TrainResult",
     "VideoRecorder",
     "WalkingCriterion",
+    "WalkingCriterionV1",
     "WalkingEvaluator",
+    "WalkingVerdict",
     "evaluate",
     "load_policy",
     "make_quadruped_vec_env",
@@ -65,12 +69,17 @@ if TYPE_CHECKING:
     from chronogym.rl.config import FINETUNE_PPO, ppo_train_config
     from chronogym.rl.trainer import TrainResult, train
     from chronogym.rl.vecenv import RslRlVecEnv
-    from chronogym.tasks.quadruped.evaluation import WalkingCriterion, WalkingEvaluator, evaluate
+    from chronogym.tasks.quadruped.evaluation import WalkingEvaluator, evaluate
     from chronogym.tasks.quadruped.play import play_quadruped
     from chronogym.tasks.quadruped.training import (
         make_quadruped_vec_env,
         quadruped_train_config,
         train_quadruped,
+    )
+    from chronogym.tasks.quadruped.walking import (
+        WalkingCriterion,
+        WalkingCriterionV1,
+        WalkingVerdict,
     )
     from chronogym.video import VideoRecorder
 

@@ -28,8 +28,6 @@ _MOVED: dict[str, str] = {
             "format_summary",
             "WalkingCriterion",
             "check_walking",
-            "WalkingScore",
-            "score_walking",
             "WalkingEvaluator",
         ),
         _EVALUATION,

@@ -71,7 +71,9 @@ class CommandRanges:
 
     ``resample_s``: draw a new command every this many seconds of an episode (as legged_gym
     does), so an episode holds several speed changes; ``None`` keeps one command per episode.
-    A command fixed by ``reset(options={"command": ...})`` is never resampled.
+    A command fixed by ``reset(options={"command": ...})`` is never resampled; with it,
+    ``options={"command_schedule": ((time_s, command), ...)}`` changes it to each ``command``
+    after ``round(time_s / control_dt)`` steps (the walking criterion's command switch).
 
     Shaping of the drawn command (all off by default): with probability ``single_axis_share``
     only one of its three components (chosen uniformly) is kept; with probability

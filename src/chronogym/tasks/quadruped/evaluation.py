@@ -1,10 +1,11 @@
 """How well a Go1 policy tracks its commands: rollouts, the summary table, and when it walks.
 
 ``chronogym play quadruped`` runs :func:`evaluate` and prints :func:`format_summary`; the
-training keeps ``best.pt`` by :class:`WalkingEvaluator`'s score, which runs every episode of
-a :class:`WalkingCriterion` in step (:func:`run_episodes_together`). Both kinds of rollout
-note each step in an :class:`EpisodeTrace`, so a batched episode reports exactly what a
-single one does.
+training keeps ``best.pt`` by :class:`WalkingEvaluator`'s verdict, which runs the episodes of
+a :class:`~.walking.WalkingCriterion` group by group, each group's episodes in step
+(:func:`run_episodes_together`). Both kinds of rollout note each step in an
+:class:`EpisodeTrace`, so a batched episode reports exactly what a single one does, and both
+return the episode's :class:`~.walking.VelocityTrace` for the criteria of :mod:`.walking`.
 """
 
 from __future__ import annotations
@@ -19,20 +20,40 @@ import numpy as np
 from tqdm import tqdm
 
 from chronogym.rl.checkpoint import load_policy
+from chronogym.tasks.quadruped.walking import (
+    DEFAULT_COMMANDS,
+    CommandCheck,
+    CommandSwitch,
+    EpisodeSpec,
+    VelocityTrace,
+    WalkingCriterion,
+    WalkingCriterionV1,
+    WalkingVerdict,
+    as_command,
+    command_label,
+)
 from chronogym.validation import check_int, check_positive
 from chronogym.video import VideoRecorder
 
 Policy = Callable[[np.ndarray], np.ndarray]
+Criterion = WalkingCriterion | WalkingCriterionV1
 
-#: Commands (vx, vy, yaw rate) that ``chronogym play quadruped`` reports by default.
-DEFAULT_COMMANDS: tuple[tuple[float, float, float], ...] = (
-    (0.5, 0.0, 0.0),
-    (1.0, 0.0, 0.0),
-    (0.0, 0.3, 0.0),
-    (-0.3, 0.0, 0.0),
-    (0.5, 0.0, 0.5),
-    (0.0, 0.0, 0.0),
-)
+__all__ = [
+    "DEFAULT_COMMANDS",
+    "EpisodeResult",
+    "EpisodeTrace",
+    "Policy",
+    "WalkingCriterion",
+    "WalkingCriterionV1",
+    "WalkingEvaluator",
+    "check_walking",
+    "check_walking_by",
+    "evaluate",
+    "format_summary",
+    "run_episode",
+    "run_episodes_together",
+    "summarize",
+]
 
 
 @dataclass(frozen=True)
@@ -48,24 +69,34 @@ class EpisodeResult:
     mean_vx: float
     mean_vy: float
     episode_return: float
+    trace: VelocityTrace = field(compare=False, repr=False)
 
 
 @dataclass
 class EpisodeTrace:
-    """What the steps of one episode leave behind: its return and the base's planar velocity
-    after each step (body frame), turned into an :class:`EpisodeResult` when it ends."""
+    """What the steps of one episode leave behind: its return, the base's velocity (body
+    frame: vx, vy, yaw rate) after each step and the command then, turned into an
+    :class:`EpisodeResult` when it ends."""
 
-    command: Sequence[float]
-    seed: int
+    spec: EpisodeSpec
     total: float = 0.0
-    vx: list[float] = field(default_factory=list)
-    vy: list[float] = field(default_factory=list)
+    samples: list[tuple[float, float, float, float, float, float]] = field(default_factory=list)
+
+    @property
+    def command(self) -> Sequence[float]:
+        return self.spec.command
+
+    @property
+    def seed(self) -> int:
+        return self.spec.seed
 
     def record(self, task: Any, reward: float) -> None:
         """Note one step: its reward and the velocity of ``task`` (a Go1 task) after it."""
         self.total += float(reward)
-        self.vx.append(float(task.base_lin_vel[0]))
-        self.vy.append(float(task.base_lin_vel[1]))
+        v, c = task.base_lin_vel, task.command
+        self.samples.append(
+            (float(v[0]), float(v[1]), task.base_yaw_rate, float(c[0]), float(c[1]), float(c[2]))
+        )
 
     def result(
         self, task: Any, terminated: bool, truncated: bool, info: dict[str, Any]
@@ -75,9 +106,16 @@ class EpisodeTrace:
         # The task logs its episode metrics when its own horizon ends the episode; a shorter
         # TimeLimit (``gym.make(..., max_episode_steps=N)``) ends it first: same errors from here.
         log = info.get("log", {})
-        command, vx, vy = self.command, self.vx, self.vy
-        x_mse = float(np.mean((np.asarray(vx) - float(command[0])) ** 2))
-        y_mse = float(np.mean((np.asarray(vy) - float(command[1])) ** 2))
+        samples = np.asarray(self.samples, dtype=np.float64).reshape(-1, 6)
+        trace = VelocityTrace(
+            command=self.spec.command, seed=self.spec.seed, dt=float(task.control_dt),
+            vx=samples[:, 0], vy=samples[:, 1], wz=samples[:, 2], commands=samples[:, 3:],
+            survived=bool(truncated and not terminated), schedule=self.spec.schedule,
+            episode_return=self.total,
+        )  # fmt: skip
+        command, vx, vy = self.command, trace.vx, trace.vy
+        x_mse = trace.mse(0)
+        y_mse = trace.mse(1)
         return EpisodeResult(
             command=tuple(float(c) for c in command),  # type: ignore[arg-type]
             seed=self.seed,
@@ -88,22 +126,25 @@ class EpisodeTrace:
             mean_vx=float(np.mean(vx)),
             mean_vy=float(np.mean(vy)),
             episode_return=self.total,
+            trace=trace,
         )
 
 
 def run_episode(
     env: Any,
     policy: Policy,
-    command: Sequence[float],
-    seed: int,
+    command: Sequence[float] | EpisodeSpec,
+    seed: int | None = None,
     recorder: VideoRecorder | None = None,
     record_steps: int = 0,
 ) -> EpisodeResult:
-    """Run one full episode of ``env`` (a SimEnv of a Go1VelocityTask) with a fixed command;
-    with ``recorder``, render its first ``record_steps`` steps into it."""
-    obs, _ = env.reset(seed=seed, options={"command": tuple(command)})
+    """Run one full episode of ``env`` (a SimEnv of a Go1VelocityTask) with a fixed command
+    and ``seed``, or as an :class:`~.walking.EpisodeSpec` says (``seed`` then unused); with
+    ``recorder``, render its first ``record_steps`` steps into it."""
+    spec = command if isinstance(command, EpisodeSpec) else EpisodeSpec.of((command, seed))
+    obs, _ = env.reset(seed=spec.seed, options=spec.options())
     task = env.unwrapped.task
-    trace = EpisodeTrace(command, seed)
+    trace = EpisodeTrace(spec)
     step = 0
     if recorder is not None:
         recorder.add(env.render, step)
@@ -119,21 +160,23 @@ def run_episode(
 
 
 def run_episodes_together(
-    envs: Sequence[Any], policy: Policy, jobs: Sequence[tuple[Sequence[float], int]]
+    envs: Sequence[Any], policy: Policy, jobs: Sequence[Any]
 ) -> list[EpisodeResult]:
-    """Run one episode per ``(command, seed)`` job, each in its own env of ``envs`` (at least
-    as many as jobs), all in step so that the policy sees one batch of observations per
-    step: :func:`run_episode`'s results at a fraction of its cost per episode."""
+    """Run one episode per job (a ``(command, seed)`` pair or an :class:`~.walking.EpisodeSpec`),
+    each in its own env of ``envs`` (at least as many as jobs), all in step so that the
+    policy sees one batch of observations per step: :func:`run_episode`'s results at a
+    fraction of its cost per episode."""
     if len(envs) < len(jobs):
         raise ValueError(f"run_episodes_together: {len(jobs)} jobs but only {len(envs)} envs")
-    envs = list(envs)[: len(jobs)]
+    specs = [EpisodeSpec.of(job) for job in jobs]
+    envs = list(envs)[: len(specs)]
     obs = np.stack(
         [
-            env.reset(seed=seed, options={"command": tuple(c)})[0]
-            for env, (c, seed) in zip(envs, jobs, strict=True)
+            env.reset(seed=spec.seed, options=spec.options())[0]
+            for env, spec in zip(envs, specs, strict=True)
         ]
     )
-    traces = [EpisodeTrace(command, seed) for command, seed in jobs]
+    traces = [EpisodeTrace(spec) for spec in specs]
     results: list[EpisodeResult | None] = [None] * len(jobs)
     running = list(range(len(jobs)))
     while running:
@@ -158,173 +201,172 @@ def evaluate(
     video: str | Path | None = None,
     progress: bool = True,
     video_seconds: float = 5.0,
+    switch: CommandSwitch | None = None,
 ) -> list[EpisodeResult]:
-    """Run ``episodes`` episodes per command; with ``video``, record the first
-    ``video_seconds`` of the first episode of each command (see :class:`VideoRecorder`)."""
+    """Run ``episodes`` episodes per command (seeds ``seed``, ``seed + 1``, ...), then as
+    many of ``switch`` (a command step during the episode), if given; with ``video``, record
+    the first ``video_seconds`` of the first episode of each command (see
+    :class:`VideoRecorder`). Each result's ``trace`` holds the episode's velocity trace."""
     check_int("episodes", episodes, low=1)
     check_positive("video_seconds", video_seconds, expected="a number > 0")
     fps = float(env.unwrapped.metadata.get("render_fps", 50))
     recorder = VideoRecorder(video, fps) if video is not None else None
     record_steps = math.ceil(video_seconds * fps)
     results = []
-    runs = [(command, seed + i) for command in commands for i in range(episodes)]
+    runs = [EpisodeSpec(as_command(c), seed + i) for c in commands for i in range(episodes)]
+    if switch is not None:
+        schedule = ((switch.at_s, switch.after),)
+        runs += [EpisodeSpec(switch.before, seed + i, schedule) for i in range(episodes)]
     iterator: Any = tqdm(runs, desc="episodes", unit="ep") if progress else runs
     try:
-        for command, episode_seed in iterator:
-            record = recorder if episode_seed == seed else None
-            results.append(run_episode(env, policy, command, episode_seed, record, record_steps))
+        for spec in iterator:
+            record = recorder if spec.seed == seed and not spec.schedule else None
+            results.append(run_episode(env, policy, spec, None, record, record_steps))
     finally:
         if recorder is not None:
             recorder.close()
     return results
 
 
-def summarize(results: Sequence[EpisodeResult]) -> list[dict[str, Any]]:
-    """One row per command: survival rate and mean tracking errors over its episodes."""
+def summarize(
+    results: Sequence[EpisodeResult], criterion: WalkingCriterion | None = None
+) -> list[dict[str, Any]]:
+    """One row per command (and per command switch): survival rate, whole-episode tracking
+    errors (v1's metric), and the values of ``criterion``'s clauses (default: v2's) on its
+    episodes: the slowest t90, the steady-state x/y MSEs, the yaw-rate MSE, and whether the
+    group passes v2 (``"v2"``, with ``"failures"``) and v1 (``"v1"``; None for a switch)."""
+    criterion = criterion if criterion is not None else WalkingCriterion()
+    v1 = WalkingCriterionV1(max_x_mse=criterion.max_x_mse, max_y_mse=criterion.max_y_mse)
+    groups: dict[tuple[Any, ...], list[EpisodeResult]] = {}
+    for result in results:
+        groups.setdefault((result.command, result.trace.schedule), []).append(result)
     rows = []
-    for command in dict.fromkeys(r.command for r in results):
-        group = [r for r in results if r.command == command]
+    for (command, schedule), group in groups.items():
+        traces = [r.trace for r in group]
+        label = command_label(command)
+        if schedule:
+            label = CommandSwitch(command, schedule[-1][1], schedule[-1][0]).label
+        check = criterion.check_group(label, traces)
         rows.append(
             {
-                "command": command,
+                "label": label,
+                "command": check.command,
                 "episodes": len(group),
                 "survival": float(np.mean([r.survived for r in group])),
                 "x_vel_mse": float(np.mean([r.x_vel_mse for r in group])),
                 "y_vel_mse": float(np.mean([r.y_vel_mse for r in group])),
                 "mean_vx": float(np.mean([r.mean_vx for r in group])),
                 "mean_vy": float(np.mean([r.mean_vy for r in group])),
+                "rise_s": check.rise_s,
+                "steady_x_mse": check.x_mse,
+                "steady_y_mse": check.y_mse,
+                "yaw_mse": check.yaw_mse,
+                "v2": check.passed,
+                "failures": list(check.failures),
+                "v1": None if schedule else v1.check_group(label, traces).passed,
             }
         )
     return rows
 
 
 def format_summary(rows: Sequence[dict[str, Any]]) -> str:
-    """The summary as an aligned text table."""
+    """The summary as an aligned text table; ``x_mse``/``y_mse`` are whole-episode MSEs (the
+    paper's metric), ``t90`` the slowest rise time, ``ss_x``/``ss_y``/``yaw`` the steady-state
+    MSEs that the walking criterion v2 bounds."""
+
+    def number(value: float | None, width: int, digits: int) -> str:
+        if value is None:
+            return f"{'-':>{width}}"
+        return f"{'never':>{width}}" if math.isinf(value) else f"{value:{width}.{digits}f}"
+
+    width = max([22, *(len(row.get("label", "")) for row in rows)])
     lines = [
-        f"{'command (vx, vy, wz)':>22} {'eps':>4} {'survival':>8} {'x_mse':>7} {'y_mse':>7} "
-        f"{'mean vx':>7} {'mean vy':>7}"
+        f"{'command (vx, vy, wz)':>{width}} {'eps':>4} {'survival':>8} {'x_mse':>7} {'y_mse':>7} "
+        f"{'mean vx':>7} {'mean vy':>7} {'t90 s':>6} {'ss_x':>7} {'ss_y':>7} {'yaw':>7} "
+        f"{'v1':>4} {'v2':>4}"
     ]
     for row in rows:
-        command = "(" + ", ".join(f"{c:+.2f}" for c in row["command"]) + ")"
+        label = row.get("label", command_label(row["command"]))
+        marks = {True: "pass", False: "FAIL", None: "-"}
         lines.append(
-            f"{command:>22} {row['episodes']:4d} {row['survival']:8.2f} {row['x_vel_mse']:7.4f} "
-            f"{row['y_vel_mse']:7.4f} {row['mean_vx']:7.3f} {row['mean_vy']:7.3f}"
+            f"{label:>{width}} {row['episodes']:4d} {row['survival']:8.2f} {row['x_vel_mse']:7.4f} "
+            f"{row['y_vel_mse']:7.4f} {row['mean_vx']:7.3f} {row['mean_vy']:7.3f} "
+            f"{number(row.get('rise_s'), 6, 2)} {number(row.get('steady_x_mse'), 7, 4)} "
+            f"{number(row.get('steady_y_mse'), 7, 4)} {number(row.get('yaw_mse'), 7, 4)} "
+            f"{marks[row.get('v1')]:>4} {marks[row.get('v2')]:>4}"
         )
     return "\n".join(lines)
 
 
-@dataclass(frozen=True)
-class WalkingCriterion:
-    """When a Go1 policy walks: for every command, ``episodes`` episodes (seeds ``seed``,
-    ``seed + 1``, ...) all survive, and the mean episode x- and y-velocity MSEs are at most
-    ``max_x_mse`` / ``max_y_mse`` (m/s)²."""
-
-    max_x_mse: float = 0.01
-    max_y_mse: float = 0.01
-    episodes: int = 5
-    seed: int = 0
-    commands: tuple[tuple[float, float, float], ...] = DEFAULT_COMMANDS
-
-    def __post_init__(self) -> None:
-        for name in ("max_x_mse", "max_y_mse"):
-            check_positive(name, getattr(self, name), expected="a threshold > 0 in (m/s)^2")
-        check_int("episodes", self.episodes, low=1)
-        if not self.commands:
-            raise ValueError("commands=(): expected at least one (vx, vy, wz) command")
-
-    def passes(self, row: dict[str, Any]) -> bool:
-        """Does one command's :func:`summarize` row meet the criterion?"""
-        return (
-            row["survival"] >= 1.0
-            and row["x_vel_mse"] <= self.max_x_mse
-            and row["y_vel_mse"] <= self.max_y_mse
-        )
-
-
 def check_walking(
-    env: Any, policy: Policy, criterion: WalkingCriterion
-) -> tuple[bool, list[dict[str, Any]]]:
-    """Whether ``policy`` walks by ``criterion``, and the summary rows evaluated.
-
-    Commands are evaluated in order and the check stops at the first one that fails
-    (and within it at the first fall), so a policy that does not walk costs little; the
-    rows then cover the commands evaluated so far.
-    """
-    rows: list[dict[str, Any]] = []
-    for command in criterion.commands:
-        results = []
-        for i in range(criterion.episodes):
-            result = run_episode(env, policy, command, criterion.seed + i)
-            results.append(result)
-            if not result.survived:
-                break
-        row = summarize(results)[0]
-        rows.append(row)
-        if not criterion.passes(row) or len(results) < criterion.episodes:
-            return False, rows
-    return True, rows
+    env: Any,
+    policy: Policy,
+    criterion: Criterion,
+    *,
+    envs: Sequence[Any] | None = None,
+    also: Sequence[Criterion] = (),
+) -> WalkingVerdict:
+    """``criterion``'s verdict on ``policy``, its groups (commands, then the switch) run in
+    order until the first that fails, so a policy that does not walk costs little; the
+    verdict then holds the groups run so far, and the traces of every episode run. A group's
+    episodes run in step in ``envs`` (as many as ``criterion.episodes``), or one after another
+    in ``env``. ``also``: more criteria judged from the same episodes (see
+    :func:`check_walking_by`)."""
+    return check_walking_by(env, policy, [criterion, *also], envs=envs)[0]
 
 
-@dataclass(frozen=True)
-class WalkingScore:
-    """How close a policy came to walking: commands passed in ``criterion.commands`` order
-    before the first that failed, and the worst x/y MSE over the commands evaluated."""
-
-    commands_passed: int
-    commands: int
-    worst_mse: float
-
-    @property
-    def walks(self) -> bool:
-        """Did every command pass?"""
-        return self.commands_passed == self.commands
-
-    def key(self) -> tuple[int, float]:
-        """Ranking key, larger is better: more commands passed, then a smaller worst MSE."""
-        return (self.commands_passed, -self.worst_mse)
-
-    def describe(self) -> str:
-        """E.g. ``"6/6 commands pass, worst MSE 0.0041"``."""
-        return (
-            f"{self.commands_passed}/{self.commands} commands pass, worst MSE {self.worst_mse:.4f}"
-        )
-
-    def columns(self) -> dict[str, float]:
-        """Its ``progress.csv`` values (:attr:`WalkingEvaluator.columns`)."""
-        return {"eval_commands_passed": self.commands_passed, "eval_worst_mse": self.worst_mse}
-
-
-def score_walking(rows: Sequence[dict[str, Any]], criterion: WalkingCriterion) -> WalkingScore:
-    """The :class:`WalkingScore` of :func:`summarize` rows in ``criterion.commands`` order."""
-    passed = 0
-    for row in rows:
-        if not criterion.passes(row):
+def check_walking_by(
+    env: Any, policy: Policy, criteria: Sequence[Criterion], *, envs: Sequence[Any] | None = None
+) -> list[WalkingVerdict]:
+    """One verdict per criterion of ``criteria`` (e.g. v2 and v1) from one set of episodes:
+    the groups of all of them, in order, each run once, while a criterion that needs it has
+    not yet failed a group."""
+    plans = [list(c.groups()) for c in criteria]
+    union = list({g.specs: g for plan in plans for g in plan}.values())
+    checks: list[list[CommandCheck]] = [[] for _ in criteria]
+    alive = [True] * len(criteria)
+    traces: list[VelocityTrace] = []
+    for group in union:
+        needed = [
+            i
+            for i, plan in enumerate(plans)
+            if alive[i] and any(g.specs == group.specs for g in plan)
+        ]
+        if not needed:
+            continue
+        if envs is not None:
+            results = run_episodes_together(envs, policy, group.specs)
+        else:
+            results = [run_episode(env, policy, spec) for spec in group.specs]
+        mine = [r.trace for r in results]
+        traces += mine
+        for i in needed:
+            check = criteria[i].check_group(group.label, mine)
+            checks[i].append(check)
+            alive[i] = check.passed
+        if not any(alive):
             break
-        passed += 1
-    worst = max((max(r["x_vel_mse"], r["y_vel_mse"]) for r in rows), default=math.inf)
-    return WalkingScore(passed, len(criterion.commands), worst)
+    return [
+        WalkingVerdict(tuple(found), len(plan), c.version, tuple(traces))
+        for c, plan, found in zip(criteria, plans, checks, strict=True)
+    ]
 
 
 class WalkingEvaluator:
-    """Scores checkpoints on ``criterion`` during training, all its episodes in step
-    (:func:`run_episodes_together`) in envs made once by ``make_env``."""
+    """Judges checkpoints by ``criterion`` during training (``best.pt``): the criterion's
+    groups in order until the first that fails, each group's episodes in step in envs made
+    once by ``make_env``."""
 
-    columns = ("eval_commands_passed", "eval_worst_mse")
+    columns = ("eval_commands_passed", "eval_worst_ratio")
 
-    def __init__(self, make_env: Callable[[], Any], criterion: WalkingCriterion) -> None:
+    def __init__(self, make_env: Callable[[], Any], criterion: Criterion) -> None:
         self.criterion = criterion
-        self.jobs = [
-            (command, criterion.seed + i)
-            for command in criterion.commands
-            for i in range(criterion.episodes)
-        ]
-        self.envs = [make_env() for _ in self.jobs]
+        self.envs = [make_env() for _ in range(criterion.episodes)]
 
-    def __call__(self, checkpoint: str | Path) -> WalkingScore:
-        """Score the policy of ``checkpoint`` (loaded as ``chronogym play`` loads it)."""
+    def __call__(self, checkpoint: str | Path) -> WalkingVerdict:
+        """Judge the policy of ``checkpoint`` (loaded as ``chronogym play`` loads it)."""
         policy = load_policy(checkpoint, torch_threads=None)
-        rows = summarize(run_episodes_together(self.envs, policy, self.jobs))
-        return score_walking(rows, self.criterion)
+        return check_walking(self.envs[0], policy, self.criterion, envs=self.envs)
 
     def close(self) -> None:
         for env in self.envs:

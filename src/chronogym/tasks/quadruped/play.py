@@ -17,6 +17,7 @@ from chronogym.engines.mujoco import check_headless_gl
 from chronogym.rl.checkpoint import load_policy
 from chronogym.tasks.quadruped.engines import check_engine, env_kwargs_for
 from chronogym.tasks.quadruped.evaluation import DEFAULT_COMMANDS, evaluate, summarize
+from chronogym.tasks.quadruped.walking import WalkingCriterion, judge, save_traces
 
 
 def play_quadruped(
@@ -33,8 +34,21 @@ def play_quadruped(
     engine: str = "mujoco",
     task_kwargs: dict[str, Any] | None = None,
     randomization: Any = None,
+    check_walking: bool = False,
+    traces: str | Path | None = None,
+    step_response: str | Path | None = None,
 ) -> list[dict[str, Any]]:
-    """Roll the checkpoint's policy out for each command; return the summary rows.
+    """Roll the checkpoint's policy out for each command; return the summary rows
+    (:func:`~chronogym.tasks.quadruped.evaluation.summarize`).
+
+    ``check_walking``: run exactly the episodes of the walking criterion
+    (:class:`~chronogym.tasks.quadruped.walking.WalkingCriterion`: its commands and its
+    command switch, 5 episodes each from seed 0), so that the rows' ``"v2"`` and ``"v1"``
+    say whether the policy walks; ``commands``, ``episodes``, ``seed`` and
+    ``max_episode_steps`` must then be left at their defaults. ``traces``: save every
+    episode's velocity trace to this ``.npz``
+    (:func:`~chronogym.tasks.quadruped.walking.load_traces` reads it); ``step_response``:
+    draw them into this PNG (:func:`~chronogym.tasks.quadruped.step_response.plot_step_response`).
 
     ``engine="chrono"`` plays it in Project Chrono (sim-to-sim for a MuJoCo-trained policy);
     the video then shows the Chrono robot's pose drawn with the MuJoCo model.
@@ -46,6 +60,28 @@ def play_quadruped(
     rendered offscreen (needs an OpenGL backend: EGL, or OSMesa with ``MUJOCO_GL=osmesa``)
     into one MP4, GIF or PNG film strip.
     """
+    criterion = WalkingCriterion()
+    switch = None
+    if check_walking:
+        given = {
+            "commands": commands is not None,
+            "episodes": episodes != 1,
+            "seed": seed != 0,
+            "max_episode_steps": max_episode_steps is not None,
+        }
+        if any(given.values()):
+            raise ValueError(
+                f"check_walking=True with {', '.join(k for k, v in given.items() if v)}: the "
+                "walking criterion runs its own commands, episodes and seeds; leave them out"
+            )
+        commands, episodes, seed = criterion.commands, criterion.episodes, criterion.seed
+        switch = criterion.switch
+    for name, path, suffix in (
+        ("traces", traces, ".npz"),
+        ("step_response", step_response, ".png"),
+    ):
+        if path is not None and Path(path).suffix.lower() != suffix:
+            raise ValueError(f"{name}={str(path)!r}: expected a file name ending in {suffix}")
     env_id = check_engine(engine, terrain)
     render_mode = "rgb_array" if video is not None else None
     if video is not None:
@@ -70,10 +106,20 @@ def play_quadruped(
             video=video,
             progress=progress,
             video_seconds=video_seconds,
+            switch=switch,
         )
     finally:
         env.close()
-    return summarize(results)
+    rows = summarize(results, criterion)
+    episode_traces = [r.trace for r in results]
+    if traces is not None:
+        save_traces(traces, episode_traces)
+    if step_response is not None:
+        from chronogym.tasks.quadruped.step_response import plot_step_response
+
+        verdict = judge(criterion, episode_traces) if check_walking else None
+        plot_step_response(episode_traces, step_response, criterion, verdict, Path(checkpoint).name)
+    return rows
 
 
 def play_randomization(

@@ -18,7 +18,8 @@ import gymnasium as gym
 from chronogym.rl.checkpoint import read_checkpoint
 from chronogym.rl.config import FINETUNE_PPO, _merge, ppo_train_config
 from chronogym.tasks.quadruped.engines import ENV_IDS, check_engine, env_kwargs_for
-from chronogym.tasks.quadruped.evaluation import WalkingCriterion, WalkingEvaluator
+from chronogym.tasks.quadruped.evaluation import WalkingEvaluator
+from chronogym.tasks.quadruped.walking import WalkingCriterion, criterion_for_episode
 from chronogym.validation import check_bool, check_int
 from chronogym.vector.env_errors import check_env_errors
 from chronogym.vector.factory import make_vec
@@ -120,7 +121,7 @@ def train_quadruped(
     update_threads: int | None = None,
     engine: str = "mujoco",
     driver_worker: bool = False,
-    eval_episodes: int = 2,
+    eval_episodes: int = 5,
     env_errors: str = "restart",
 ) -> Any:
     """Train (or, with ``resume``, continue / fine-tune) the Go1 velocity tracker with PPO.
@@ -143,11 +144,13 @@ def train_quadruped(
     again right after its rebuild (a bug at reset) stops the run at once. ``"raise"`` stops
     at the first exception, for debugging a task.
 
-    ``eval_episodes``: at every save point the checkpoint is scored on the walking criterion
-    of ``chronogym play`` (:class:`~chronogym.tasks.quadruped.evaluation.WalkingCriterion`'s
-    commands, this many episodes each, in envs of the training process) and the best so far
-    is kept as ``best.pt`` (``best.json`` says why); 0 evaluates nothing. The episodes' x/y
-    tracking errors are ``progress.csv``'s ``PROGRESS_METRICS`` columns. Returns
+    ``eval_episodes``: at every save point the checkpoint is judged by the walking criterion
+    (:class:`~chronogym.tasks.quadruped.walking.WalkingCriterion`, v2: its commands and its
+    command switch, this many episodes each, in envs of the training process; the default 5
+    is the criterion's own, so ``best.pt`` is chosen on exactly the episodes that say whether
+    a policy walks) and the best so far is kept as ``best.pt`` (``best.json`` says why); 0
+    evaluates nothing. The groups passed in order and the worst clause's value over its bound
+    are ``progress.csv``'s ``eval_commands_passed`` and ``eval_worst_ratio``. Returns
     :class:`~chronogym.rl.TrainResult`.
     """
     # torch and RSL-RL: imported when a training starts, not with this module
@@ -236,11 +239,20 @@ def walking_evaluator(
 ) -> WalkingEvaluator:
     """A :class:`~chronogym.tasks.quadruped.evaluation.WalkingEvaluator` on the training's
     task as ``chronogym play`` makes it (the ``TRAINING_ONLY`` settings left out): the
-    standard commands, ``episodes`` episodes each (seeds 0, 1, ...)."""
+    walking criterion's groups, ``episodes`` episodes each (seeds 0, 1, ...); in episodes
+    shorter than twice the criterion's switch time, the switch comes half-way through."""
     env_id = ENV_IDS[engine]
     physics = {k: v for k, v in (task_kwargs or {}).items() if k not in TRAINING_ONLY}
     kwargs = env_kwargs_for(terrain, physics, engine)
-    return WalkingEvaluator(lambda: gym.make(env_id, **kwargs), WalkingCriterion(episodes=episodes))
+    evaluator = WalkingEvaluator(
+        lambda: gym.make(env_id, **kwargs), WalkingCriterion(episodes=episodes)
+    )
+    env = evaluator.envs[0]
+    steps = env.spec.max_episode_steps if env.spec is not None else None  # gym.make's TimeLimit
+    task = env.unwrapped.task
+    length_s = (steps or task.max_episode_steps) * task.control_dt
+    evaluator.criterion = criterion_for_episode(evaluator.criterion, length_s)
+    return evaluator
 
 
 def default_update_threads() -> int:

@@ -68,6 +68,7 @@ from chronogym.tasks.quadruped.config import (
     RewardWeights,
 )
 from chronogym.tasks.quadruped.model import DEFAULT_JOINT_POS
+from chronogym.tasks.quadruped.walking import as_command
 
 #: Reward terms in the order of ``RewardWeights``' fields (the task's term vector).
 REWARD_TERMS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(RewardWeights))
@@ -187,6 +188,7 @@ class Go1VelocityBase(Task, ABC):
         self._episode_sum = np.zeros(len(REWARD_TERMS))
         self._steps = 0
         self._next_command: int | None = None
+        self._schedule: list[tuple[int, np.ndarray]] = []
         self._next_push: int | None = None
         self._fell = False
         self._base_contact = False
@@ -256,6 +258,7 @@ class Go1VelocityBase(Task, ABC):
         fixed = options.get("command")
         self.command = self._draw_command(rng, fixed)
         self._next_command = None if fixed is not None else self._resample_interval_steps()
+        self._schedule = self._command_schedule(options.get("command_schedule"), fixed)
         self.last_action[:] = 0.0
         self.prev_action[:] = 0.0
         self.feet_air_time[:] = 0.0
@@ -297,6 +300,32 @@ class Go1VelocityBase(Task, ABC):
         )
         return ranges.shape(command, rng)
 
+    def _command_schedule(self, schedule: Any, fixed: Any) -> list[tuple[int, np.ndarray]]:
+        """``options["command_schedule"]``, ``((time_s, command), ...)``: the command becomes
+        ``command`` after ``round(time_s / control_dt)`` steps; as (step, command) pairs."""
+        if schedule is None:
+            return []
+        if fixed is None:
+            raise ValueError(
+                f"options['command_schedule']={schedule!r} without options['command']: "
+                "a schedule changes a fixed command; give the first one as 'command'"
+            )
+        expected = "((time_s, (vx, vy, yaw_rate)), ...) with times > 0 s in increasing order"
+        try:
+            pairs = [(float(t), c) for t, c in schedule]
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"options['command_schedule']={schedule!r}: expected {expected}"
+            ) from None
+        steps = [round(t / self.control_dt) for t, _ in pairs]
+        times = [t for t, _ in pairs]
+        if not all(math.isfinite(t) and t > 0 for t in times) or steps != sorted(set(steps)):
+            raise ValueError(f"options['command_schedule']={schedule!r}: expected {expected}")
+        return [
+            (n, np.array(as_command(c, "options['command_schedule'] command")))
+            for n, (_, c) in zip(steps, pairs, strict=True)
+        ]
+
     def _apply_randomization(self, rng: np.random.Generator) -> None:
         dr = self.config.randomization
         if dr is None:
@@ -327,6 +356,8 @@ class Go1VelocityBase(Task, ABC):
             velocity = self.config.randomization.push_velocity
             self._kick_base(self._episode_rng.uniform(-1.0, 1.0, size=2) * velocity)
             self._next_push += self._push_interval_steps()
+        if self._schedule and self._steps >= self._schedule[0][0]:
+            self.command = self._schedule.pop(0)[1]
         if self._next_command is not None and self._steps >= self._next_command:
             self.command = self._draw_command(self._episode_rng, None)
             self._next_command += self._resample_interval_steps()
@@ -370,6 +401,11 @@ class Go1VelocityBase(Task, ABC):
         self.feet_contact[:] = contact
         if self._slip_on:
             self._feet_xy_before = self._feet_xy()
+
+    @property
+    def base_yaw_rate(self) -> float:
+        """The base's yaw rate (rad/s, body frame) as last observed."""
+        return float(self._obs_raw[OBS_ANG_VEL][2])
 
     @property
     def reward_terms(self) -> dict[str, float]:
