@@ -91,6 +91,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # 10 s training episodes. Training's own evaluation (for best.pt) then runs 10 s episodes
     # too, where that of the committed runs ran 20 s ones; this script's check runs 20 s.
     "ep10s": {"task": {"max_episode_steps": 500}},
+    # Levers for criterion v2's rise time (2026-11-27): commands resampled every 5 s (four
+    # speed changes per episode), and twice the reward weight of linear-velocity tracking.
+    "resample5": {"task": {"commands": {"resample_s": 5.0}}},
+    "track2": {"task": {"rewards": {"tracking_lin_vel": 2.0}}},
 }
 
 
@@ -116,12 +120,14 @@ def variant_settings(text: str) -> tuple[dict[str, Any], dict[str, Any]]:
     for name in variants:
         _merge(ppo, VARIANTS[name].get("ppo", {}))
         _merge(task, VARIANTS[name].get("task", {}))
-    from chronogym.tasks.quadruped.config import CommandRanges, DomainRandomization
+    from chronogym.tasks.quadruped.config import CommandRanges, DomainRandomization, RewardWeights
 
     if "commands" in task:
         task["commands"] = CommandRanges(**task["commands"])
     if "randomization" in task:
         task["randomization"] = DomainRandomization(**task["randomization"])
+    if "rewards" in task:
+        task["rewards"] = RewardWeights(**task["rewards"])
     return ppo, task
 
 

@@ -290,6 +290,8 @@ class SocketBackend(ActorBackend):
                 return None  # another node: plain actor calls
             sock.settimeout(self.start_timeout)
             sock.connect(path)
+            with contextlib.suppress(OSError):  # the worker unlinks it too, once it accepted
+                os.unlink(path)
         except Exception as error:  # a worker that died now is found by its next plain call
             logger.warning(
                 "chronogym: no socket to worker at %s (%s); using actor calls", path, error
