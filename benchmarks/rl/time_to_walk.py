@@ -158,6 +158,11 @@ def train_run(
     return out
 
 
+def checkpoints_exist(run: Path) -> bool:
+    """Has ``run`` a ``progress.csv`` and a saved checkpoint in it?"""
+    return (run / "progress.csv").is_file() and bool(checkpoints(run))
+
+
 def checkpoints(run: Path) -> list[tuple[int, float, int, Path]]:
     """(iteration, wall seconds, env steps, path) of each saved checkpoint, in order."""
     with (run / "progress.csv").open(newline="") as handle:
@@ -260,15 +265,16 @@ def plot(
     styles = ("-", "--", ":", "-.", (0, (6, 2, 1, 2, 1, 2)))
     for run in dict.fromkeys(r["run"] for r in rows):
         mine = [r for r in rows if r["run"] == run]
+        if not all("v2_passed" in r for r in mine):
+            continue  # scored before v2: in the right panel only
         steps = [r["env_steps"] / 1e6 for r in mine]
         color = colors(configs.index(mine[0]["config"]) % 10)
         style = styles[int(mine[0]["seed"]) % len(styles)]
         left.plot(steps, [r["commands_passed"] for r in mine], lw=0.6, color=color, ls=":")
-        if all("v2_passed" in r for r in mine):
-            left.plot(steps, [r["v2_passed"] for r in mine], marker=".", ms=3, lw=1,
-                      color=color, ls=style)  # fmt: skip
-            middle.plot(steps, [r["v2_worst_ratio"] for r in mine], marker=".", ms=3, lw=1,
-                        color=color, ls=style)  # fmt: skip
+        left.plot(steps, [r["v2_passed"] for r in mine], marker=".", ms=3, lw=1, color=color,
+                  ls=style)  # fmt: skip
+        middle.plot(steps, [r["v2_worst_ratio"] for r in mine], marker=".", ms=3, lw=1,
+                    color=color, ls=style)  # fmt: skip
     left.set_ylabel(f"groups passed in order (v2 of {len(criterion.groups())}; v1 dotted)")
     middle.set_ylabel("v2: worst clause value / its bound")
     middle.axhline(1.0, color="k", lw=0.8, ls="--")
@@ -394,6 +400,9 @@ def main(argv: list[str] | None = None) -> None:
         for config, seed in runs:
             print(f"training {config} seed {seed} for {budget}", flush=True)
             train_run(config, seed, budget, args.save_interval, args.runs)
+    missing = [run_name(c, s) for c, s in runs if not checkpoints_exist(args.runs / run_name(c, s))]
+    if missing:
+        parser.error(f"no progress.csv and checkpoints in {args.runs} for: {', '.join(missing)}")
     rows: list[dict[str, Any]] = []
     summary = []
     responses = []
@@ -408,7 +417,7 @@ def main(argv: list[str] | None = None) -> None:
     sources = ([args.out] if args.keep else []) + list(args.merge)
     earlier = load_earlier(sources, set(runs))
     rows = earlier["rows"] + rows
-    order = list(dict.fromkeys(s["config"] for s in earlier["runs"] + summary))
+    order = list(dict.fromkeys([*earlier["order"], *(s["config"] for s in summary)]))
     summary = sorted(earlier["runs"] + summary, key=lambda s: (order.index(s["config"]), s["seed"]))
     per_config = medians(summary)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -460,17 +469,20 @@ def merged_settings(
 
 
 def load_earlier(sources: list[Path], running: set[tuple[str, int]]) -> dict[str, Any]:
-    """The rows, run summaries, settings and machine records in the result folders
+    """The rows, run summaries, settings, machine records and configuration order in the
+    result folders
     ``sources`` (a later folder's run replaces an earlier one's) of the runs (configuration,
     seed) that are not in ``running``."""
     found: dict[tuple[str, int], dict[str, Any]] = {}
     settings_kept: dict[str, Any] = {}
     machines: dict[str, Any] = {}
+    order: list[str] = []
     for out in sources:
         path = out / "time_to_walk.json"
         if not path.exists():
             continue
         record = json.loads(path.read_text())
+        order += list(record.get("configs", {}))
         with (out / "time_to_walk.csv").open(newline="") as handle:
             rows = list(csv.DictReader(handle))
         for run in record.get("runs", []):
@@ -491,12 +503,13 @@ def load_earlier(sources: list[Path], running: set[tuple[str, int]]) -> dict[str
         "runs": [v["run"] for v in found.values()],
         "settings": settings_kept,
         "machines": machines,
+        "order": order,
     }
 
 
 def as_numbers(row: dict[str, str]) -> dict[str, Any]:
     """A ``time_to_walk.csv`` row with its numbers read back."""
-    out: dict[str, Any] = dict(row)
+    out: dict[str, Any] = {k: v for k, v in row.items() if v != ""}  # "": not scored by it
     for key in ("seed", "iteration", "env_steps", "commands_passed", "v2_passed"):
         if row.get(key) not in (None, ""):
             out[key] = int(row[key])

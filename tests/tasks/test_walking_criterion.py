@@ -102,7 +102,7 @@ def test_each_clause_fails_alone(label, change, clause):
     assert len(failed[0].failures) == 1 and failed[0].failures[0].startswith(clause), failed
     index = LABELS.index(failed[0].label)
     assert verdict.commands_passed == index
-    assert verdict.worst_ratio > 1 or clause.startswith("survival")
+    assert verdict.worst_ratio > 1  # a fall too: 1 + the share of episodes that fell
 
 
 def test_a_slow_start_fails_v2_only_where_v1_would_pass_it():

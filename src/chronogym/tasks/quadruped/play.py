@@ -118,7 +118,9 @@ def play_quadruped(
         from chronogym.tasks.quadruped.step_response import plot_step_response
 
         verdict = judge(criterion, episode_traces) if check_walking else None
-        plot_step_response(episode_traces, step_response, criterion, verdict, Path(checkpoint).name)
+        plot_step_response(
+            episode_traces, step_response, criterion, verdict, "/".join(Path(checkpoint).parts[-2:])
+        )
     return rows
 
 

@@ -172,7 +172,8 @@ class CommandCheck:
     steady-state MSEs that the criterion bounds, averaged over the episodes; ``yaw_mse``:
     likewise (None: not judged); ``episode_x_mse``/``episode_y_mse``: whole-episode MSEs
     (the paper's metric, v1's clause); ``ratio``: the worst judged value over its bound
-    (<= 1 on every clause passes); ``failures``: what failed, in words."""
+    (<= 1 on every clause passes; a fall counts as 1 plus the share of episodes that fell);
+    ``failures``: what failed, in words."""
 
     label: str
     command: Command
@@ -451,6 +452,13 @@ def _survival_failures(traces: Sequence[VelocityTrace]) -> list[str]:
     return [f"survival: {len(fell)}/{len(traces)} episodes ended early (seeds {fell})"]
 
 
+def _survival_ratio(traces: Sequence[VelocityTrace]) -> float:
+    """Survival's place among the ratios: 0 if every episode survived, else 1 plus the share
+    that fell (a group with a fall never ranks as passing)."""
+    fell = sum(not t.survived for t in traces)
+    return 1.0 + fell / len(traces) if fell else 0.0
+
+
 def _check(
     label: str, command: Command, traces: Sequence[VelocityTrace], rise: float | None,
     x_mse: float, y_mse: float, yaw_mse: float | None, ratios: list[float], failures: list[str],
@@ -466,7 +474,7 @@ def _check(
         yaw_mse=yaw_mse,
         episode_x_mse=_mean([t.mse(0) for t in traces]),
         episode_y_mse=_mean([t.mse(1) for t in traces]),
-        ratio=max(ratios),
+        ratio=max([*ratios, _survival_ratio(traces)]),
         failures=tuple(failures),
     )
 
