@@ -215,8 +215,7 @@ def evaluate(
     results = []
     runs = [EpisodeSpec(as_command(c), seed + i) for c in commands for i in range(episodes)]
     if switch is not None:
-        schedule = ((switch.at_s, switch.after),)
-        runs += [EpisodeSpec(switch.before, seed + i, schedule) for i in range(episodes)]
+        runs += [switch.episode(seed + i) for i in range(episodes)]
     iterator: Any = tqdm(runs, desc="episodes", unit="ep") if progress else runs
     try:
         for spec in iterator:

@@ -73,6 +73,10 @@ class CommandSwitch:
         object.__setattr__(self, "after", as_command(self.after, "switch.after"))
         check_positive("switch.at_s", self.at_s, expected="a time > 0 s into the episode")
 
+    def episode(self, seed: int) -> EpisodeSpec:
+        """The episode of this switch with ``seed``."""
+        return EpisodeSpec(self.before, seed, ((self.at_s, self.after),))
+
     @property
     def label(self) -> str:
         """``"switch (+0.50, ...) -> (+1.00, ...) at 10 s"``."""
@@ -323,14 +327,10 @@ class WalkingCriterion:
 
     def groups(self) -> list[_Group]:
         """The episodes to run, grouped as they are judged, in order."""
-        seeds = range(self.seed, self.seed + self.episodes)
-        groups = [
-            _Group(command_label(c), tuple(EpisodeSpec(c, s) for s in seeds)) for c in self.commands
-        ]
+        groups = _command_groups(self)
         if self.switch is not None:
-            sw = self.switch
-            specs = tuple(EpisodeSpec(sw.before, s, ((sw.at_s, sw.after),)) for s in seeds)
-            groups.append(_Group(sw.label, specs))
+            seeds = range(self.seed, self.seed + self.episodes)
+            groups.append(_Group(self.switch.label, tuple(self.switch.episode(s) for s in seeds)))
         return groups
 
     def check_group(self, label: str, traces: Sequence[VelocityTrace]) -> CommandCheck:
@@ -403,10 +403,7 @@ class WalkingCriterionV1:
         _check_common(self)
 
     def groups(self) -> list[_Group]:
-        seeds = range(self.seed, self.seed + self.episodes)
-        return [
-            _Group(command_label(c), tuple(EpisodeSpec(c, s) for s in seeds)) for c in self.commands
-        ]
+        return _command_groups(self)
 
     def check_group(self, label: str, traces: Sequence[VelocityTrace]) -> CommandCheck:
         command = traces[0].command
@@ -434,6 +431,15 @@ def criterion_for_episode(criterion: WalkingCriterion, length_s: float) -> Walki
     if length_s < 4 * criterion.settle_s:
         changes["settle_s"] = round(length_s / 4, 6)
     return dataclasses.replace(criterion, **changes) if changes else criterion
+
+
+def _command_groups(criterion: Any) -> list[_Group]:
+    """One group per command of ``criterion``: its episodes from rest, seeds ``seed``, ..."""
+    seeds = range(criterion.seed, criterion.seed + criterion.episodes)
+    return [
+        _Group(command_label(c), tuple(EpisodeSpec(c, s) for s in seeds))
+        for c in criterion.commands
+    ]
 
 
 def _check_common(criterion: Any) -> None:
