@@ -19,7 +19,9 @@ Python per step (receiving, stepping, answering) queues for the 2 cores, most at
 Paths, side by side (the same W, envs per worker and step cost, one after another):
 
 - ``socket``: ``RayVectorEnv`` with its default transport, workers on the driver's node
-  (Unix sockets);
+  (Unix sockets; the barrier step through shared memory, :mod:`chronogym.vector.shared_step`);
+- ``socket_messages``: the same with ``shared_memory=False``: one socket message each way
+  per worker and step (the default before the shared-memory step);
 - ``actor``: ``RayVectorEnv(transport="actor")``: one Ray actor call per worker and step,
   the path of workers on other nodes;
 - ``driver_worker``: ``RayVectorEnv(driver_worker=True)``: the driver steps the last of the
@@ -99,7 +101,7 @@ from chronogym.sizing import StepModel, fit_line, fit_overhead, synthetic_step_s
 
 DEFAULT_OUT = RESULTS / "scaling.json"
 ENV_ID = "chronogym/Synthetic-v0"
-LOCAL_PATHS = ("socket", "actor", "driver_worker", "async")
+LOCAL_PATHS = ("socket", "socket_messages", "actor", "driver_worker", "async")
 ALL_PATHS = (*LOCAL_PATHS, "multinode")
 PREDICT_AT = (64, 256)
 STRAGGLER_CVS = (0.0, 0.25, 0.5)
@@ -190,6 +192,8 @@ def build(path: str, workers: int, epw: int, kwargs: dict[str, Any], address: st
     options: dict[str, Any] = {"envs_per_worker": epw, "env_kwargs": kwargs}
     if path == "actor":
         options["transport"] = "actor"
+    elif path == "socket_messages":
+        options["shared_memory"] = False
     elif path == "driver_worker":
         options["driver_worker"] = True
     elif path == "multinode":
@@ -554,7 +558,7 @@ def worker_memory(rows: list[dict[str, Any]]) -> dict[str, float | None]:
 # -- report -----------------------------------------------------------------------------------
 
 RUN_COLUMNS = (
-    Column("path", 13, align="<", key="path"),
+    Column("path", 15, align="<", key="path"),
     Column("W", 4, key="workers"),
     Column("epw", 3, key="envs_per_worker"),
     Column("step ms", 7, "{:g}", key="step_ms"),
@@ -566,7 +570,7 @@ RUN_COLUMNS = (
     Column("x async", 7, "{:.2f}", key="x_async"),
 )
 FIT_COLUMNS = (
-    Column("path", 13, align="<", key="path"),
+    Column("path", 15, align="<", key="path"),
     Column("epw", 3, key="envs_per_worker"),
     Column("step ms", 7, "{:g}", key="step_ms"),
     Column("a us", 8, "{:,.0f}", key="a_us"),
@@ -581,7 +585,7 @@ FIT_COLUMNS = (
     Column("E256 bound", 10, "{:.2f}", key="predicted_rel_e_256_driver_bound"),
 )
 START_COLUMNS = (
-    Column("path", 13, align="<", key="path"),
+    Column("path", 15, align="<", key="path"),
     Column("W", 4, key="workers"),
     Column("epw", 3, key="envs_per_worker"),
     Column("start s", 7, "{:.2f}", key="start_s"),

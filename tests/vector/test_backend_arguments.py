@@ -77,6 +77,7 @@ RAY_ONLY_VALUES = {
     "start_timeout": 60.0,
     "transport": "socket",
     "spin_us": 0,
+    "shared_memory": False,
     "driver_worker": True,
 }
 
@@ -212,7 +213,7 @@ def test_make_vec_env_kwargs_reach_ids_with_every_backend(backend):
             "sync",
             {"shared_memory": False},
             r"shared_memory does not apply to Gymnasium's SyncVectorEnv; it is an argument of "
-            r"backend='async' only",
+            r"backend='ray' or 'async' only",
         ),
         (
             "ray",

@@ -36,6 +36,16 @@ transport, hop by hop (file: function):
 6. ``worker_vector_env.py``: ``_join_results`` joins the workers' parts
    (``batching.py``: ``join_obs``; ``infos.py``: ``join_infos``).
 
+With every worker on the driver's node (the usual case), the barrier ``step`` skips hops
+2-4's one message per worker: ``worker_vector_env.py``: ``_shared_step`` ->
+``socket_transport.py``: ``SocketBackend.shared_step`` -> ``shared_step.py``:
+``SharedStep.step`` copies the actions into a memory block shared with the workers and
+wakes them all with one byte on a pipe; each worker's ``_serve_conn`` calls
+``SharedServer.serve`` (the same ``EnvGroup.step_packed``), which writes its rows and counts
+its answer; the last one wakes the driver, which copies every row out at once. A worker
+with infos, restarts or an error writes its whole answer (``encode_answer``) beside its
+rows, and hops 5-6 take it from there. ``shared_memory=False`` keeps the messages.
+
 ``send`` / ``recv`` (and ``step_async`` / ``step_wait``, ``async_reset``) take the same
 hops, except that the calls wait in ``in_flight.py``: ``InFlight.submit`` /
 ``InFlight.collect`` (``Backend.wait``, then ``Backend.gather``) until enough envs

@@ -112,6 +112,13 @@ class RayVectorEnv(WorkerVectorEnv):
             on a read; an answer caught while spinning saves the wake-up of
             an idle core (~40 µs each way on a VM). Default 250; 0 never spins
             (no CPU at all while waiting).
+        shared_memory: ``transport="socket"`` only: when every worker is on
+            the driver's node, the barrier ``step`` goes through one shared
+            memory block and one wake-up for all workers
+            (:mod:`chronogym.vector.shared_step`), so the driver's CPU per
+            worker no longer holds a message each way; ``send`` / ``recv``
+            and ``profile_steps()`` still use one socket message per worker.
+            Default True; False: sockets only. Same numbers either way.
         driver_worker: the driver steps the last worker's envs itself, in its
             own process, while the Ray workers step theirs
             (:mod:`chronogym.vector.driver_worker`): one process and one round
@@ -167,13 +174,16 @@ class RayVectorEnv(WorkerVectorEnv):
         env_errors: str = "raise",
         transport: str | None = None,
         spin_us: float | None = None,
+        shared_memory: bool = True,
         driver_worker: bool = False,
     ) -> None:
         count = len(normalize_env_fns(env_fns, num_envs))
         self.transport = transport = check_transport(transport)
         options: dict[str, Any] = {}
+        check_bool("shared_memory", shared_memory)
         if transport == "socket":
             options["spin_us"] = check_spin_us(spin_us)
+            options["shared_memory"] = shared_memory
         elif spin_us is not None:
             raise ValueError(
                 f"spin_us={spin_us!r} with transport={transport!r}: spin_us applies to "

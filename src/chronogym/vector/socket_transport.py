@@ -36,6 +36,7 @@ import contextlib
 import logging
 import math
 import os
+import pickle
 import select
 import shutil
 import socket
@@ -46,11 +47,20 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from chronogym.validation import check_number
 from chronogym.vector.actor_transport import ActorBackend, ActorGroup
 from chronogym.vector.backend import Outcome, gather_split
 from chronogym.vector.group import EnvGroup
 from chronogym.vector.relay import ANSWERED, LOST, SILENT, RelayHandle, Relays
+from chronogym.vector.shared_step import (
+    ATTACH,
+    SharedAnswers,
+    SharedLayout,
+    SharedServer,
+    SharedStep,
+)
 from chronogym.vector.wire_format import (
     ANSWER,
     REQUEST,
@@ -118,9 +128,11 @@ def spin_until_readable(poller: select.poll, spin_s: float) -> bool:
     return True
 
 
-def _poller(sock: socket.socket) -> select.poll:
+def _poller(sock: socket.socket, *fds: int) -> select.poll:
+    """A poll object over ``sock`` (and ``fds``) for reading."""
     poller = select.poll()
-    poller.register(sock, select.POLLIN)
+    for fd in (sock, *fds):
+        poller.register(fd, select.POLLIN)
     return poller
 
 
@@ -171,22 +183,59 @@ def _serve(group: EnvGroup, listener: socket.socket, path: str, spin_s: float) -
 
 
 def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
-    """Answer step requests until the driver hangs up (EOF) or the connection fails."""
+    """Answer step requests until the driver hangs up (EOF) or the connection fails: over
+    the socket, and, once the driver attached one, through shared memory
+    (:mod:`chronogym.vector.shared_step`)."""
     head = memoryview(bytearray(REQUEST.size))
     data = memoryview(bytearray(256))
-    poller, spinner = _poller(conn), AdaptiveSpin(spin_s)
-    while True:
-        try:
+    plain, spinner = _poller(conn), AdaptiveSpin(spin_s)
+    shared: SharedServer | None = None
+    go_pollers: dict[int, select.poll] = {}
+    try:
+        while True:
+            poller = plain if shared is None else go_pollers[shared.go_fd]
             spinner.spin(poller)  # while stepping, the next request comes soon
-            fill(conn, head, 0, REQUEST.size)
+            ready = {fd for fd, _ in poller.poll()}
             spinner.arrived()
-            size, timed = REQUEST.unpack(head)
+            if shared is not None and shared.go_fd in ready and shared.pending():
+                shared.serve(lambda actions: _step_bytes(group, actions, False))
+                if shared.on_socket:
+                    conn.sendall(shared.on_socket)
+                continue
+            if conn.fileno() not in ready:
+                continue
+            fill(conn, head, 0, REQUEST.size)
+            size, kind = REQUEST.unpack(head)
+            if kind == ATTACH:
+                if shared is not None:
+                    shared.close()
+                shared = _attach(conn, size)
+                go_pollers = {fd: _poller(conn, fd) for fd in shared.go_fds}
+                continue
             if size > len(data):
                 data = memoryview(bytearray(size))
             fill(conn, data, 0, size)
-            conn.sendall(encode_answer(_step_bytes(group, data[:size], bool(timed))))
-        except (OSError, EOFError):
-            return
+            conn.sendall(encode_answer(_step_bytes(group, data[:size], bool(kind))))
+    except (OSError, EOFError):
+        return
+    finally:
+        if shared is not None:
+            shared.close()
+
+
+def _attach(conn: socket.socket, size: int) -> SharedServer:
+    """Take the shared step the driver hands over (its layout, then the block's and the
+    pipes' file descriptors); reply one byte."""
+    message, fds, _, _ = socket.recv_fds(conn, size, 4)
+    while len(message) < size:
+        more = conn.recv(size - len(message))
+        if not more:
+            raise EOFError("the driver closed its socket while attaching a shared step")
+        message += more
+    layout, w, gen = pickle.loads(message)  # trusted: own worker (its driver's private socket)
+    server = SharedServer(layout, w, gen, fds)
+    conn.sendall(b"\x01")
+    return server
 
 
 def _step_bytes(group: EnvGroup, action_bytes: memoryview, timed: bool) -> Any:
@@ -213,9 +262,17 @@ class SocketBackend(ActorBackend):
 
     worker_cls = SocketWorker
 
-    def __init__(self, *args: Any, spin_us: float | None = None, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        *args: Any,
+        spin_us: float | None = None,
+        shared_memory: bool = True,
+        **kwargs: Any,
+    ) -> None:
         super().__init__(*args, **kwargs)
         self.spin_us = check_spin_us(spin_us)
+        self.shared_memory = shared_memory  # barrier steps through shared memory, if it can
+        self._shared: SharedStep | None = None
         self._dir: str | None = None
         self._socks: list[socket.socket | None] = []
         self._pollers: list[select.poll | None] = []
@@ -302,6 +359,8 @@ class SocketBackend(ActorBackend):
         return sock
 
     def _disconnect(self, w: int) -> None:
+        if self._shared is not None:
+            self._shared.attached.discard(w)
         if self._relays is not None:
             self._relays.forget(w)
         sock, self._socks[w], self._pollers[w] = self._socks[w], None, None
@@ -313,10 +372,13 @@ class SocketBackend(ActorBackend):
         self._disconnect(worker)
         super().replace(worker, kwargs)
         self._connect([worker])
+        if self._shared is not None and not self._attach(worker):
+            self._close_shared(f"its replacement worker {worker} could not attach")
 
     def shutdown(self) -> None:
         for w in range(len(self._socks)):
             self._disconnect(w)
+        self._close_shared()
         if self._relays is not None:
             self._relays.shutdown()
             self._relays = None
@@ -324,6 +386,59 @@ class SocketBackend(ActorBackend):
         if self._dir is not None:
             shutil.rmtree(self._dir, ignore_errors=True)
             self._dir = None
+
+    # -- the shared-memory barrier step -------------------------------------------------------
+    def shared_step(
+        self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
+    ) -> SharedAnswers | None:
+        """A barrier step of every worker through shared memory
+        (:mod:`chronogym.vector.shared_step`); None when that path is off or not every
+        worker is connected here (then: one socket message per worker, or calls)."""
+        if not self.shared_memory or not all(s is not None for s in self._socks):
+            return None
+        if self._shared is None and not self._open_shared(actions, slices, obs_row):
+            return None
+        assert self._shared is not None
+        deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
+        return self._shared.step(actions, self._socks, deadline, self._lost, self._read)
+
+    def _open_shared(
+        self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
+    ) -> bool:
+        """Make the block and attach every worker; False (and off for good) if one fails."""
+        layout = SharedLayout(tuple(slices), actions.nbytes // slices[-1][1], obs_row)
+        try:
+            self._shared = SharedStep(layout, self._dir, self.spin_us * 1e-6)
+        except OSError as error:
+            self.shared_memory = False
+            logger.warning("chronogym: no shared-memory step (%s); using sockets", error)
+            return False
+        for w in range(len(self.actors)):
+            if not self._attach(w):
+                self._close_shared(f"worker {w} could not attach")
+                return False
+        return True
+
+    def _attach(self, w: int) -> bool:
+        """Hand worker ``w`` the shared step; on failure its socket is closed (calls)."""
+        sock = self._socks[w]
+        assert self._shared is not None
+        if sock is None:
+            return False
+        attached = self._shared.attach(w, sock, self.start_timeout)
+        if attached:
+            sock.settimeout(self.step_timeout)
+        else:
+            self._disconnect(w)
+        return attached
+
+    def _close_shared(self, why: str = "") -> None:
+        if why:
+            logger.warning("chronogym: shared-memory step turned off: %s; using sockets", why)
+            self.shared_memory = False
+        if self._shared is not None:
+            self._shared.close()
+            self._shared = None
 
     # -- steps ----------------------------------------------------------------------------
     def submit(self, worker: int, method: str, *args: Any) -> Any:

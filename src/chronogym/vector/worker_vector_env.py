@@ -362,6 +362,8 @@ class WorkerVectorEnv(VectorEnv):
         self._check_reset_needed("step()")
         if self.profile is not None:
             return self._step_profiled(actions, self.profile)
+        if self._packed and (shared := self._shared_step(actions)) is not None:
+            return shared
         workers = list(range(self.num_workers))
         args = self._step_args(workers, actions)
         outcomes = self._call_all(workers, self._step_method, args)
@@ -369,6 +371,32 @@ class WorkerVectorEnv(VectorEnv):
         if (error := self._env_error(seen)) is not None:
             raise error from error.__cause__
         return self._join_results(workers, parts)
+
+    def _shared_step(self, actions: Any) -> tuple | None:
+        """``step`` through the backend's shared memory, when it has it
+        (:mod:`chronogym.vector.shared_step`): nothing per worker on the driver's side
+        unless a worker has infos, restarts or an error to report. None: not available."""
+        shared_step = getattr(self._backend, "shared_step", None)
+        if shared_step is None:
+            return None
+        space = self.single_action_space
+        array = prepare_box_action(actions, space, self.num_envs, self.invalid_action)  # type: ignore[arg-type]
+        obs_space = self.single_observation_space
+        obs_row = int(np.prod(obs_space.shape, dtype=np.int64)) * obs_space.dtype.itemsize  # type: ignore[union-attr]
+        answers = shared_step(np.ascontiguousarray(array), self._slices, obs_row)
+        if answers is None:
+            return None
+        if answers.extras:  # infos, restarts, errors: each worker's answer, as over sockets
+            workers = list(range(self.num_workers))
+            outcomes = [answers.outcome(w, lo, hi) for w, (lo, hi) in enumerate(self._slices)]
+            parts, seen = self._step_parts(workers, outcomes)
+            if (error := self._env_error(seen)) is not None:
+                raise error from error.__cause__
+            return self._join_results(workers, parts)
+        kept = answers.obs.view(obs_space.dtype).reshape(self.num_envs, *obs_space.shape)  # type: ignore[misc]
+        kept.flags.writeable = False
+        self._last_parts = [kept[lo:hi] for lo, hi in self._slices]
+        return kept.copy(), answers.rewards, answers.terminations, answers.truncations, {}
 
     def _step_parts(
         self, workers: list[int], outcomes: list[Outcome]

@@ -1,0 +1,374 @@
+"""The barrier step through shared memory: one wake-up for every worker on the driver's node.
+
+Over sockets, a barrier step costs the driver one message out and one in per worker,
+and each costs it a system call and the kernel's wake-up of the other end: ~35 µs of
+the driver's CPU per worker per step on a 2-core VM, a serial cost that caps W workers
+at 1 / (W * 35 µs) steps per second. Here the driver and its workers on this node share
+one memory block (a ``memfd``, or an unlinked file in the sockets' private directory,
+passed over each worker's socket with ``SCM_RIGHTS``: nothing has a name others can
+open) holding every env's action row and answer row, so a step costs the driver:
+
+1. one copy of the batched actions into the block, and the step's number (``gen``);
+2. one byte written to a *go* pipe that every worker waits on (one system call; the
+   kernel wakes the waiting workers, ~2 µs each, unless they were still spinning);
+3. one wake-up when the last worker has answered: each worker writes its rows and its
+   ``done`` word, then counts its answer under a lock on the block (``lockf``: the
+   workers' system calls, not the driver's), and the last to count writes one byte to
+   the *done* pipe; the driver checks that every ``done`` word holds ``gen``;
+4. one copy of the obs, rewards and flags out of the block.
+
+So the driver's CPU per worker is the kernel's wake-up of an idle worker and a few
+bytes of copying: nothing per worker in Python. Two go pipes alternate (step ``g``
+uses pipe ``g % 2``) so a fast worker never sees the step it just answered as a new
+one; the driver drains pipe ``g % 2`` once every worker has answered step ``g``.
+Memory order: every hand-over is a pipe system call (the kernel's locks order the
+block's writes before it), so it holds on any CPU, not just x86.
+
+A worker's answer that carries anything besides its rows (infos, restarts, an env's
+error) is written whole, in :mod:`chronogym.vector.wire_format`'s answer format, to
+the worker's *tail* slot in the block (status ``IN_TAIL``), or sent on its socket when
+it does not fit (``ON_SOCKET``). A worker that dies shows as a hung-up socket, one
+silent past ``step_timeout`` as lost: both are replaced by the socket transport as
+before. The same :class:`~chronogym.vector.group.EnvGroup` call
+(``step_packed``) makes the bytes either way, so the numbers are the socket path's.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import mmap
+import os
+import pickle
+import select
+import socket
+import tempfile
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from chronogym.vector.backend import Outcome, StepAnswer
+from chronogym.vector.wire_format import ANSWER, REQUEST, decode_answer, encode_answer
+
+ATTACH = 2  # REQUEST's flag byte: attach to a shared step (0 and 1: a step over the socket)
+PLAIN, IN_TAIL, ON_SOCKET = 0, 1, 2  # a worker's status word after a shared step
+TAIL_BYTES = 64 * 1024  # each worker's slot for an answer with infos (else: its socket)
+CHECK_S = 0.2  # while blocked, look for hung-up workers (and deadlines) this often
+ALIGN = 64
+
+
+def _aligned(n: int) -> int:
+    return -(-n // ALIGN) * ALIGN
+
+
+@dataclass(frozen=True)
+class SharedLayout:
+    """Where each part of a shared step lies in the block (byte offsets)."""
+
+    slices: tuple[tuple[int, int], ...]  # each worker's envs [lo, hi)
+    action_row: int  # bytes of one env's action
+    obs_row: int  # bytes of one env's observation
+    tail_bytes: int = TAIL_BYTES
+    offsets: dict[str, int] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        n, w = self.slices[-1][1], len(self.slices)
+        sizes = {
+            "gen": 8,
+            "count": 16,  # the step whose answers are counted, and how many came
+            "actions": n * self.action_row,
+            "obs": n * self.obs_row,
+            "rewards": 8 * n,
+            "terminations": n,
+            "truncations": n,
+            "done": 8 * w,
+            "status": 8 * w,  # per worker: uint32 status, uint32 tail length
+            "tails": w * self.tail_bytes,
+        }
+        at = 0
+        for name, size in sizes.items():
+            self.offsets[name] = at
+            at += _aligned(size)
+        self.offsets["end"] = at
+
+    @property
+    def num_envs(self) -> int:
+        return self.slices[-1][1]
+
+    @property
+    def size(self) -> int:
+        return self.offsets["end"]
+
+
+class SharedViews:
+    """NumPy views of a mapped block, as both ends read and write it."""
+
+    def __init__(self, layout: SharedLayout, buf: mmap.mmap) -> None:
+        n, w, o = layout.num_envs, len(layout.slices), layout.offsets
+        self.buf = buf
+        self.gen = np.frombuffer(buf, np.uint64, 1, o["gen"])
+        self.count = np.frombuffer(buf, np.uint64, 2, o["count"])
+        self.actions = np.frombuffer(buf, np.uint8, n * layout.action_row, o["actions"])
+        self.obs = np.frombuffer(buf, np.uint8, n * layout.obs_row, o["obs"])
+        self.rewards = np.frombuffer(buf, np.float64, n, o["rewards"])
+        self.terminations = np.frombuffer(buf, np.bool_, n, o["terminations"])
+        self.truncations = np.frombuffer(buf, np.bool_, n, o["truncations"])
+        self.done = np.frombuffer(buf, np.uint64, w, o["done"])
+        self.status = np.frombuffer(buf, np.uint32, 2 * w, o["status"]).reshape(w, 2)
+        self.tails = np.frombuffer(buf, np.uint8, w * layout.tail_bytes, o["tails"])
+
+    def release(self) -> None:
+        """Drop the views, so the block can be unmapped."""
+        for name in list(vars(self)):
+            if name != "buf":
+                delattr(self, name)
+
+
+def _new_block(size: int, directory: str | None) -> int:
+    """A file descriptor of ``size`` zero bytes that no other process can open by name."""
+    if hasattr(os, "memfd_create"):
+        fd = os.memfd_create("chronogym-step", os.MFD_CLOEXEC)
+    else:  # no memfd (macOS): a file in the private directory, unlinked at once
+        fd, path = tempfile.mkstemp(prefix="step-", dir=directory)
+        os.unlink(path)
+    os.ftruncate(fd, size)
+    return fd
+
+
+def _drain(fd: int) -> int:
+    """Read whatever a non-blocking pipe holds; the byte count."""
+    got = 0
+    with contextlib.suppress(BlockingIOError):
+        while chunk := os.read(fd, 65536):
+            got += len(chunk)
+            if len(chunk) < 65536:
+                break
+    return got
+
+
+# -- driver side ------------------------------------------------------------------------------
+@dataclass
+class SharedAnswers:
+    """One shared step's results: whole-batch arrays, plus the workers with more to say."""
+
+    obs: np.ndarray  # uint8, one row of raw bytes per env (the caller views them as its space)
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    extras: dict[int, Outcome]  # worker -> its full answer (infos, restarts, error, loss)
+
+    def outcome(self, w: int, lo: int, hi: int) -> Outcome:
+        """Worker ``w``'s answer as the socket path gives it (rows ``lo:hi``)."""
+        if w in self.extras:
+            return self.extras[w]
+        answer = StepAnswer(
+            self.obs[lo:hi].tobytes(),
+            self.rewards[lo:hi].tobytes(),
+            self.terminations[lo:hi].tobytes(),
+            self.truncations[lo:hi].tobytes(),
+            None,
+            None,
+        )
+        return Outcome(True, answer)
+
+
+class SharedStep:
+    """The driver's end: the block, the pipes, and the barrier step over them."""
+
+    def __init__(self, layout: SharedLayout, directory: str | None, spin_s: float) -> None:
+        from chronogym.vector.socket_transport import AdaptiveSpin
+
+        self.layout = layout
+        self._fd = _new_block(layout.size, directory)
+        self._map = mmap.mmap(self._fd, layout.size)
+        self.views = SharedViews(layout, self._map)
+        self._go = [os.pipe(), os.pipe()]
+        self._done_r, self._done_w = os.pipe()
+        for fd in (self._go[0][0], self._go[1][0], self._done_r):
+            os.set_blocking(fd, False)
+        self._done_poll = select.poll()
+        self._done_poll.register(self._done_r, select.POLLIN)
+        self._spinner = AdaptiveSpin(spin_s)
+        self.gen = 0
+        self.attached: set[int] = set()
+
+    def attach(self, w: int, sock: socket.socket, timeout: float | None) -> bool:
+        """Hand worker ``w`` the block and the pipes over its socket; did it take them?"""
+        payload = pickle.dumps((self.layout, w, self.gen))
+        fds = [self._fd, self._go[0][0], self._go[1][0], self._done_w]
+        try:
+            sock.sendall(REQUEST.pack(len(payload), ATTACH))
+            socket.send_fds(sock, [payload], fds)
+            sock.settimeout(timeout)
+            ok = sock.recv(1) == b"\x01"
+        except OSError:
+            return False
+        if ok:
+            self.attached.add(w)
+            self.views.done[w] = self.gen
+        return ok
+
+    def step(
+        self,
+        actions: np.ndarray,
+        socks: list[socket.socket | None],
+        deadline: float | None,
+        lost: Any,
+        read: Any,
+    ) -> SharedAnswers:
+        """One barrier step of every worker. ``lost(w, error)`` gives a lost worker's Outcome;
+        ``read(w, deadline)`` reads an answer sent on worker ``w``'s socket."""
+        v = self.views
+        g = self.gen = self.gen + 1
+        v.actions[:] = np.frombuffer(actions, np.uint8)
+        v.gen[0] = g
+        go = self._go[g % 2][1]
+        os.write(go, b"\x01")
+        extras = self._wait(g, socks, deadline, lost)
+        _drain(self._go[g % 2][0])
+        obs = v.obs.reshape(self.layout.num_envs, self.layout.obs_row).copy()
+        answers = SharedAnswers(
+            obs, v.rewards.copy(), v.terminations.copy(), v.truncations.copy(), extras
+        )
+        for w in np.flatnonzero(v.status[:, 0]).tolist():
+            if w in extras:
+                continue
+            status, size = v.status[w]
+            if status == IN_TAIL:
+                at = w * self.layout.tail_bytes
+                view = memoryview(v.tails[at : at + size].tobytes())
+                head, *sizes = ANSWER.unpack_from(view)
+                extras[w] = decode_answer(head, sizes, view)
+            else:
+                try:
+                    extras[w] = read(w, deadline)
+                except (OSError, EOFError) as error:
+                    extras[w] = lost(w, error)
+        return answers
+
+    def _wait(
+        self, g: int, socks: list[socket.socket | None], deadline: float | None, lost: Any
+    ) -> dict[int, Outcome]:
+        """Until every worker's ``done`` word holds ``g``; the workers lost meanwhile."""
+        v, lost_now = self.views, {}
+        spinner, checked = self._spinner, time.monotonic()
+        spinner.spin(self._done_poll)
+        while True:
+            _drain(self._done_r)
+            missing = np.flatnonzero(v.done != g)
+            if not len(missing) or all(int(w) in lost_now for w in missing):
+                spinner.arrived()
+                return lost_now
+            now = time.monotonic()
+            wait_s = CHECK_S if deadline is None else min(CHECK_S, max(deadline - now, 0.0))
+            if not self._done_poll.poll(max(1, int(wait_s * 1000))) or now - checked >= CHECK_S:
+                checked = time.monotonic()
+                for w in missing.tolist():
+                    if w not in lost_now and (why := self._why_lost(w, socks[w], deadline)):
+                        lost_now[w] = lost(w, why)
+
+    @staticmethod
+    def _why_lost(w: int, sock: socket.socket | None, deadline: float | None) -> Any:
+        """Why worker ``w`` will not answer (its socket closed, or past the deadline), or None."""
+        if sock is None:
+            return EOFError(f"worker {w}'s socket was closed before its answer came")
+        ready = select.select([sock], [], [], 0)[0]
+        if ready:
+            with contextlib.suppress(BlockingIOError, OSError):
+                if sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b"":
+                    return EOFError(f"worker {w} hung up during a shared step")
+        if deadline is not None and time.monotonic() >= deadline:
+            return TimeoutError()
+        return None
+
+    def close(self) -> None:
+        """Unmap the block and close the pipes (workers keep their own copies until EOF)."""
+        self.views.release()
+        with contextlib.suppress(BufferError, ValueError):
+            self._map.close()
+        for fd in (self._fd, *self._go[0], *self._go[1], self._done_r, self._done_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+# -- worker side ------------------------------------------------------------------------------
+class SharedServer:
+    """A worker's end: answers the shared steps of its envs (rows ``lo:hi``)."""
+
+    def __init__(self, layout: SharedLayout, w: int, gen: int, fds: list[int]) -> None:
+        self.layout, self.w = layout, w
+        self.lo, self.hi = layout.slices[w]
+        self._mem_fd, go0, go1, self._done_w = fds
+        self._map = mmap.mmap(self._mem_fd, layout.size)
+        self._go = (go0, go1)
+        self.views = SharedViews(layout, self._map)
+        self.last = gen
+        self.on_socket = b""  # an answer too long for the tail slot, to send on the socket
+
+    @property
+    def go_fds(self) -> tuple[int, int]:
+        """Both go pipes (step ``g`` signals on ``go_fds[g % 2]``)."""
+        return self._go
+
+    @property
+    def go_fd(self) -> int:
+        """The pipe that signals the next step."""
+        return self._go[(self.last + 1) % 2]
+
+    def pending(self) -> bool:
+        """Has the driver started a step this worker has not answered? (after the go pipe
+        was seen readable: its read orders the driver's writes before ours)"""
+        return int(self.views.gen[0]) > self.last
+
+    def serve(self, step: Any) -> None:
+        """Answer the current step: ``step(action_bytes)`` gives a StepAnswer or StepFailure."""
+        v, lo, hi, lay = self.views, self.lo, self.hi, self.layout
+        g = int(v.gen[0])
+        answer = step(v.actions[lo * lay.action_row : hi * lay.action_row])
+        status, size, message = PLAIN, 0, b""
+        if isinstance(answer, StepAnswer):
+            v.obs[lo * lay.obs_row : hi * lay.obs_row] = np.frombuffer(answer.obs, np.uint8)
+            v.rewards[lo:hi] = np.frombuffer(answer.rewards, np.float64)
+            v.terminations[lo:hi] = np.frombuffer(answer.terminations, np.bool_)
+            v.truncations[lo:hi] = np.frombuffer(answer.truncations, np.bool_)
+            extra = answer.infos is not None or answer.restarts or answer.timings
+        else:
+            extra = True
+        if extra:
+            message = encode_answer(answer)
+            size = len(message)
+            if size <= lay.tail_bytes:
+                at = self.w * lay.tail_bytes
+                v.tails[at : at + size] = np.frombuffer(message, np.uint8)
+                status = IN_TAIL
+            else:
+                status = ON_SOCKET
+        v.status[self.w] = (status, size)
+        v.done[self.w] = g
+        self.last = g
+        if self._counted_last(g):
+            os.write(self._done_w, b"\x01")
+        self.on_socket = message if status == ON_SOCKET else b""
+
+    def _counted_last(self, g: int) -> bool:
+        """Count this answer to step ``g`` (under a lock on the block: the workers are
+        separate processes); is it the last one, which wakes the driver?"""
+        count = self.views.count
+        fcntl.lockf(self._mem_fd, fcntl.LOCK_EX, 1)
+        try:
+            if int(count[0]) != g:
+                count[0], count[1] = g, 0
+            count[1] += 1
+            return int(count[1]) >= len(self.layout.slices)
+        finally:
+            fcntl.lockf(self._mem_fd, fcntl.LOCK_UN, 1)
+
+    def close(self) -> None:
+        self.views.release()
+        with contextlib.suppress(BufferError, ValueError):
+            self._map.close()
+        for fd in (*self._go, self._done_w, self._mem_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)

@@ -1,0 +1,119 @@
+"""The barrier step through shared memory (``RayVectorEnv(shared_memory=True)``, the default
+with workers on the driver's node): the same numbers as serially, answers with infos in the
+tail slot and on the socket, faults, and the switch. Real Ray (2 CPUs), real MuJoCo."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+from vector_rollouts import ENV_ID, assert_same_rollouts, vector_rollout
+
+from chronogym import BoolArgumentError, RayVectorEnv, SerialVectorEnv
+from chronogym.testing.synthetic import ENV_ID as SYNTHETIC_ID
+from chronogym.vector.shared_step import TAIL_BYTES, SharedLayout
+
+
+def synthetic_rollout(vec, steps: int) -> list:
+    """Seeded random actions; every step's five results."""
+    rng = np.random.default_rng(5)
+    out = [vec.reset(seed=3)]
+    for _ in range(steps):
+        out.append(vec.step(rng.uniform(-1, 1, (vec.num_envs, 2)).astype(np.float32)))
+    return out
+
+
+def shared_steps(vec: RayVectorEnv) -> int:
+    """Barrier steps the vector env made through shared memory so far."""
+    shared = vec._backend._shared
+    return 0 if shared is None else shared.gen
+
+
+@pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
+def test_shared_step_matches_serial(ray_cluster, mode):
+    """5 envs on workers of 2, 2 and 1 (uneven rows); episodes end, so SameStep's final_obs
+    infos travel in the tail slots."""
+    serial = vector_rollout(SerialVectorEnv(ENV_ID, 5, autoreset_mode=mode), 200)
+    vec = RayVectorEnv(ENV_ID, 5, envs_per_worker=2, autoreset_mode=mode)
+    try:
+        assert_same_rollouts(vector_rollout(vec, 200), serial)
+        assert shared_steps(vec) == 200
+        assert vec._backend._shared.attached == {0, 1, 2}
+    finally:
+        vec.close()
+
+
+@pytest.mark.parametrize(
+    "info_floats",
+    [0, 3, TAIL_BYTES // 4],  # no info; one in the tail slot; one too long for it (the socket)
+)
+def test_infos_of_every_size_come_back(ray_cluster, info_floats):
+    kwargs = {"step_ms": 0.0, "info_floats": info_floats, "max_steps": 7}
+    serial = SerialVectorEnv(SYNTHETIC_ID, 4, envs_per_worker=2, env_kwargs=kwargs)
+    vec = RayVectorEnv(SYNTHETIC_ID, 4, envs_per_worker=2, env_kwargs=kwargs)
+    try:
+        assert_same_rollouts(synthetic_rollout(vec, 20), synthetic_rollout(serial, 20))
+        assert shared_steps(vec) == 20
+        if info_floats:
+            _, _, _, _, info = vec.step(np.zeros((4, 2), np.float32))
+            assert info["payload"].shape == (4, info_floats)
+    finally:
+        vec.close()
+
+
+def test_a_worker_killed_between_shared_steps_is_replaced_and_attached(ray_cluster):
+    vec = RayVectorEnv(ENV_ID, 4, envs_per_worker=2)
+    try:
+        vec.reset(seed=0)
+        actions = np.zeros((4, 1), np.float32)
+        vec.step(actions)
+        os.kill(vec.worker_pids()[1], signal.SIGKILL)
+        time.sleep(0.3)
+        _, rewards, _, truncated, info = vec.step(actions)
+        assert (rewards[2:] == 0).all()
+        assert truncated.tolist() == [False, False, True, True]
+        assert info["worker_restarted"][2:].all()
+        before = shared_steps(vec)
+        _, _, _, truncated, _ = vec.step(actions)  # the replacement steps in shared memory
+        assert shared_steps(vec) == before + 1 and not truncated.any()
+        assert vec._backend._shared.attached == {0, 1}
+    finally:
+        vec.close()
+
+
+def test_shared_memory_off_steps_over_sockets_with_the_same_numbers(ray_cluster):
+    on = RayVectorEnv(ENV_ID, 3, envs_per_worker=1, num_cpus=0.3)
+    off = RayVectorEnv(ENV_ID, 3, envs_per_worker=1, num_cpus=0.3, shared_memory=False)
+    try:
+        assert_same_rollouts(vector_rollout(off, 60), vector_rollout(on, 60))
+        assert shared_steps(off) == 0 and shared_steps(on) == 60
+        assert all(off._backend.connected())
+    finally:
+        on.close()
+        off.close()
+
+
+def test_actor_transport_and_driver_worker_take_no_shared_step(ray_cluster):
+    vec = RayVectorEnv(ENV_ID, 2, envs_per_worker=1, driver_worker=True)
+    try:
+        vector_rollout(vec, 5)
+        assert shared_steps(vec) == 0
+    finally:
+        vec.close()
+
+
+def test_layout_parts_do_not_overlap():
+    layout = SharedLayout(((0, 2), (2, 3)), action_row=8, obs_row=12)
+    starts = sorted(v for k, v in layout.offsets.items() if k != "end")
+    assert starts == sorted(set(starts)) and all(s % 64 == 0 for s in starts)
+    assert layout.offsets["obs"] - layout.offsets["actions"] >= 3 * 8
+    assert layout.size >= layout.offsets["tails"] + 2 * TAIL_BYTES
+
+
+@pytest.mark.parametrize("value", ["yes", 1, None])
+def test_bad_shared_memory_is_named(value):
+    with pytest.raises(BoolArgumentError, match=rf"^shared_memory={value!r}: expected True or"):
+        RayVectorEnv(ENV_ID, 2, shared_memory=value)
