@@ -20,6 +20,9 @@ Paths, side by side (the same W, envs per worker and step cost, one after anothe
 
 - ``socket``: ``RayVectorEnv`` with its default transport, workers on the driver's node
   (Unix sockets; the barrier step through shared memory, :mod:`chronogym.vector.shared_step`);
+- ``socket_tree``: the same with the workers woken in groups (a leader per group of 8
+  wakes the rest) at every W; the default groups only where each worker has a core
+  (:func:`chronogym.vector.shared_step.wants_tree`), never on 2 cores with W > 2;
 - ``socket_messages``: the same with ``shared_memory=False``: one socket message each way
   per worker and step (the default before the shared-memory step);
 - ``actor``: ``RayVectorEnv(transport="actor")``: one Ray actor call per worker and step,
@@ -101,7 +104,7 @@ from chronogym.sizing import StepModel, fit_line, fit_overhead, synthetic_step_s
 
 DEFAULT_OUT = RESULTS / "scaling.json"
 ENV_ID = "chronogym/Synthetic-v0"
-LOCAL_PATHS = ("socket", "socket_messages", "actor", "driver_worker", "async")
+LOCAL_PATHS = ("socket", "socket_tree", "socket_messages", "actor", "driver_worker", "async")
 ALL_PATHS = (*LOCAL_PATHS, "multinode")
 PREDICT_AT = (64, 256)
 STRAGGLER_CVS = (0.0, 0.25, 0.5)
@@ -198,7 +201,10 @@ def build(path: str, workers: int, epw: int, kwargs: dict[str, Any], address: st
         options["driver_worker"] = True
     elif path == "multinode":
         options.update(address=address, scheduling="spread")
-    return RayVectorEnv(ENV_ID, num_envs, **options)
+    vec = RayVectorEnv(ENV_ID, num_envs, **options)
+    if path == "socket_tree":
+        vec._backend.wake_tree = True  # groups of FANOUT, whatever the cores (first step)
+    return vec
 
 
 def worker_pids(path: str, vec: Any) -> list[int]:

@@ -14,7 +14,14 @@ from vector_rollouts import ENV_ID, assert_same_rollouts, vector_rollout
 
 from chronogym import BoolArgumentError, RayVectorEnv, SerialVectorEnv
 from chronogym.testing.synthetic import ENV_ID as SYNTHETIC_ID
-from chronogym.vector.shared_step import TAIL_BYTES, SharedLayout
+from chronogym.vector.shared_step import (
+    FANOUT,
+    TAIL_BYTES,
+    TREE_MIN_WORKERS,
+    SharedLayout,
+    wake_plan,
+    wants_tree,
+)
 
 
 def synthetic_rollout(vec, steps: int) -> list:
@@ -117,3 +124,80 @@ def test_layout_parts_do_not_overlap():
 def test_bad_shared_memory_is_named(value):
     with pytest.raises(BoolArgumentError, match=rf"^shared_memory={value!r}: expected True or"):
         RayVectorEnv(ENV_ID, 2, shared_memory=value)
+
+
+def test_a_worker_that_cannot_attach_turns_the_shared_step_off(ray_cluster, monkeypatch):
+    """The fallback: a refused attach closes that worker's socket (Ray calls), the rest keep
+    their sockets, and every step is still exact."""
+    from chronogym.vector import shared_step
+
+    attach = shared_step.SharedStep.attach
+
+    def refuse_worker_1(self, w, sock, timeout):
+        return False if w == 1 else attach(self, w, sock, timeout)
+
+    monkeypatch.setattr(shared_step.SharedStep, "attach", refuse_worker_1)
+    serial = vector_rollout(SerialVectorEnv(ENV_ID, 3), 30)
+    vec = RayVectorEnv(ENV_ID, 3, envs_per_worker=1, num_cpus=0.3)
+    try:
+        assert_same_rollouts(vector_rollout(vec, 30), serial)
+        assert vec._backend._shared is None and not vec._backend.shared_memory
+        assert vec._backend.connected() == [True, False, True]
+    finally:
+        vec.close()
+
+
+def test_wake_plan_groups_many_workers_with_a_core_each():
+    assert wake_plan(3, tree=False) == [[0, 1, 2]]
+    groups = wake_plan(TREE_MIN_WORKERS + 1, tree=True)
+    assert [w for g in groups for w in g] == list(range(TREE_MIN_WORKERS + 1))
+    assert {len(g) for g in groups[:-1]} == {FANOUT}
+    assert wants_tree(TREE_MIN_WORKERS, cpus=64) and not wants_tree(TREE_MIN_WORKERS - 1, 64)
+    assert not wants_tree(TREE_MIN_WORKERS, cpus=2)  # more workers than cores: flat
+
+
+@pytest.fixture
+def small_groups(monkeypatch):
+    """Groups of 2 (the driver's side decides who wakes whom)."""
+    from chronogym.vector import shared_step
+
+    monkeypatch.setattr(shared_step, "FANOUT", 2)
+
+
+def grouped(vec: RayVectorEnv) -> RayVectorEnv:
+    vec._backend.wake_tree = True  # read at the first step
+    return vec
+
+
+def test_leaders_wake_their_groups_with_the_same_numbers(ray_cluster, small_groups):
+    serial = vector_rollout(SerialVectorEnv(ENV_ID, 5, autoreset_mode="SameStep"), 80)
+    vec = grouped(
+        RayVectorEnv(ENV_ID, 5, envs_per_worker=1, num_cpus=0.2, autoreset_mode="SameStep")
+    )
+    try:
+        assert_same_rollouts(vector_rollout(vec, 80), serial)
+        shared = vec._backend._shared
+        assert shared.groups == [[0, 1], [2, 3], [4]] and shared_steps(vec) == 80
+        assert [shared.role(w) for w in range(5)] == ["leader", "member"] * 2 + ["leader"]
+    finally:
+        vec.close()
+
+
+def test_a_dead_leader_does_not_strand_its_group(ray_cluster, small_groups):
+    """Worker 2 leads worker 3: killed, the driver wakes 3 itself; 2's replacement leads."""
+    vec = grouped(RayVectorEnv(ENV_ID, 4, envs_per_worker=1, num_cpus=0.2))
+    try:
+        vec.reset(seed=0)
+        actions = np.zeros((4, 1), np.float32)
+        vec.step(actions)
+        assert vec._backend._shared.role(2) == "leader"
+        os.kill(vec.worker_pids()[2], signal.SIGKILL)
+        time.sleep(0.3)
+        _, _, _, truncated, _ = vec.step(actions)
+        assert truncated.tolist() == [False, False, True, False]
+        for _ in range(3):  # the replacement wakes worker 3 again
+            _, _, _, truncated, _ = vec.step(actions)
+            assert not truncated.any()
+        assert vec._backend._shared.attached == {0, 1, 2, 3}
+    finally:
+        vec.close()

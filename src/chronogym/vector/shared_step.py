@@ -18,9 +18,17 @@ open) holding every env's action row and answer row, so a step costs the driver:
 4. one copy of the obs, rewards and flags out of the block.
 
 So the driver's CPU per worker is the kernel's wake-up of an idle worker and a few
-bytes of copying: nothing per worker in Python. Two go pipes alternate (step ``g``
-uses pipe ``g % 2``) so a fast worker never sees the step it just answered as a new
-one; the driver drains pipe ``g % 2`` once every worker has answered step ``g``.
+bytes of copying: nothing per worker in Python. From :data:`TREE_MIN_WORKERS` workers on,
+when each has a core (:func:`wants_tree`), even the wake-ups leave the driver
+(:func:`wake_plan`): the go pipe wakes one *leader* per
+group of :data:`FANOUT`, and each leader, before its own step, wakes its group through the
+group's own pair of pipes (draining the byte of the step before, which every member is past).
+A leader found dead has its group woken by the driver. The price is one more wake-up hop
+for the members (tens of µs), small beside the steps that many workers are for.
+
+Two go pipes alternate (step ``g`` uses pipe ``g % 2``) so a fast worker never sees the
+step it just answered as a new one; the driver drains pipe ``g % 2`` once every worker has
+answered step ``g``.
 Memory order: every hand-over is a pipe system call (the kernel's locks order the
 block's writes before it), so it holds on any CPU, not just x86.
 
@@ -54,6 +62,9 @@ from chronogym.vector.wire_format import ANSWER, REQUEST, decode_answer, encode_
 
 ATTACH = 2  # REQUEST's flag byte: attach to a shared step (0 and 1: a step over the socket)
 PLAIN, IN_TAIL, ON_SOCKET = 0, 1, 2  # a worker's status word after a shared step
+DIRECT, LEADER, MEMBER = "direct", "leader", "member"  # how a worker is woken (see wake_plan)
+FANOUT = 8  # with many workers: groups of this many, each woken by its first (the leader)
+TREE_MIN_WORKERS = 16  # fewer workers: the driver wakes them all itself
 TAIL_BYTES = 64 * 1024  # each worker's slot for an answer with infos (else: its socket)
 CHECK_S = 0.2  # while blocked, look for hung-up workers (and deadlines) this often
 ALIGN = 64
@@ -137,6 +148,29 @@ def _new_block(size: int, directory: str | None) -> int:
     return fd
 
 
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity where the OS tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def wants_tree(workers: int, cpus: int) -> bool:
+    """Wake in groups? Only from :data:`TREE_MIN_WORKERS` workers on, and only when each has
+    a core of its own: with more workers than cores a member waits for its leader to get a
+    core (measured on 2 cores, mixed: docs/performance/vector.md#scaling)."""
+    return TREE_MIN_WORKERS <= workers <= cpus
+
+
+def wake_plan(workers: int, tree: bool) -> list[list[int]]:
+    """Groups of workers woken together: one group (the driver wakes each worker) without
+    ``tree``, else groups of :data:`FANOUT` whose first worker, woken by the driver, wakes
+    the rest (the driver's kernel work per step: one wake-up per group)."""
+    if not tree:
+        return [list(range(workers))]
+    return [list(range(lo, min(lo + FANOUT, workers))) for lo in range(0, workers, FANOUT)]
+
+
 def _drain(fd: int) -> int:
     """Read whatever a non-blocking pipe holds; the byte count."""
     got = 0
@@ -177,7 +211,9 @@ class SharedAnswers:
 class SharedStep:
     """The driver's end: the block, the pipes, and the barrier step over them."""
 
-    def __init__(self, layout: SharedLayout, directory: str | None, spin_s: float) -> None:
+    def __init__(
+        self, layout: SharedLayout, directory: str | None, spin_s: float, tree: bool = False
+    ) -> None:
         from chronogym.vector.socket_transport import AdaptiveSpin
 
         self.layout = layout
@@ -186,7 +222,11 @@ class SharedStep:
         self.views = SharedViews(layout, self._map)
         self._go = [os.pipe(), os.pipe()]
         self._done_r, self._done_w = os.pipe()
-        for fd in (self._go[0][0], self._go[1][0], self._done_r):
+        self.groups = wake_plan(len(layout.slices), tree)
+        self._group_of = {w: k for k, group in enumerate(self.groups) for w in group}
+        tree = len(self.groups) > 1
+        self._group_go = [[os.pipe(), os.pipe()] if tree else None for _ in self.groups]
+        for fd in (self._go[0][0], self._go[1][0], self._done_r, *self._group_reads()):
             os.set_blocking(fd, False)
         self._done_poll = select.poll()
         self._done_poll.register(self._done_r, select.POLLIN)
@@ -194,10 +234,32 @@ class SharedStep:
         self.gen = 0
         self.attached: set[int] = set()
 
+    def _group_reads(self) -> list[int]:
+        return [pair[0] for pipes in self._group_go if pipes for pair in pipes]
+
+    def role(self, w: int) -> str:
+        """How worker ``w`` is woken: by the driver (direct, or a group's leader) or by its
+        group's leader (member)."""
+        k = self._group_of[w]
+        if self._group_go[k] is None:
+            return DIRECT
+        return LEADER if self.groups[k][0] == w else MEMBER
+
+    def _wake_fds(self, w: int) -> list[int]:
+        """The pipes worker ``w`` waits on (two), then, for a leader, its group's (two read
+        ends to drain, two write ends to wake the members with)."""
+        role, pipes = self.role(w), self._group_go[self._group_of[w]]
+        if role == DIRECT:
+            return [self._go[0][0], self._go[1][0]]
+        assert pipes is not None
+        if role == MEMBER:
+            return [pipes[0][0], pipes[1][0]]
+        return [self._go[0][0], self._go[1][0], pipes[0][0], pipes[1][0], pipes[0][1], pipes[1][1]]
+
     def attach(self, w: int, sock: socket.socket, timeout: float | None) -> bool:
         """Hand worker ``w`` the block and the pipes over its socket; did it take them?"""
-        payload = pickle.dumps((self.layout, w, self.gen))
-        fds = [self._fd, self._go[0][0], self._go[1][0], self._done_w]
+        payload = pickle.dumps((self.layout, w, self.gen, self.role(w)))
+        fds = [self._fd, self._done_w, *self._wake_fds(w)]
         try:
             sock.sendall(REQUEST.pack(len(payload), ATTACH))
             socket.send_fds(sock, [payload], fds)
@@ -268,14 +330,18 @@ class SharedStep:
                 for w in missing.tolist():
                     if w not in lost_now and (why := self._why_lost(w, socks[w], deadline)):
                         lost_now[w] = lost(w, why)
+                        if self.role(w) == LEADER:  # wake its group, as it would have
+                            pipes = self._group_go[self._group_of[w]]
+                            os.write(pipes[g % 2][1], b"\x01")  # type: ignore[index]
 
     @staticmethod
     def _why_lost(w: int, sock: socket.socket | None, deadline: float | None) -> Any:
         """Why worker ``w`` will not answer (its socket closed, or past the deadline), or None."""
         if sock is None:
             return EOFError(f"worker {w}'s socket was closed before its answer came")
-        ready = select.select([sock], [], [], 0)[0]
-        if ready:
+        poller = select.poll()  # not select(): a driver may hold more than 1024 descriptors
+        poller.register(sock, select.POLLIN)
+        if poller.poll(0):
             with contextlib.suppress(BlockingIOError, OSError):
                 if sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b"":
                     return EOFError(f"worker {w} hung up during a shared step")
@@ -288,7 +354,8 @@ class SharedStep:
         self.views.release()
         with contextlib.suppress(BufferError, ValueError):
             self._map.close()
-        for fd in (self._fd, *self._go[0], *self._go[1], self._done_r, self._done_w):
+        group_fds = [fd for pipes in self._group_go if pipes for pair in pipes for fd in pair]
+        for fd in (self._fd, *self._go[0], *self._go[1], self._done_r, self._done_w, *group_fds):
             with contextlib.suppress(OSError):
                 os.close(fd)
 
@@ -297,10 +364,14 @@ class SharedStep:
 class SharedServer:
     """A worker's end: answers the shared steps of its envs (rows ``lo:hi``)."""
 
-    def __init__(self, layout: SharedLayout, w: int, gen: int, fds: list[int]) -> None:
+    def __init__(self, layout: SharedLayout, w: int, gen: int, role: str, fds: list[int]) -> None:
         self.layout, self.w = layout, w
         self.lo, self.hi = layout.slices[w]
-        self._mem_fd, go0, go1, self._done_w = fds
+        for fd in fds:  # received descriptors: not for the env's own child processes
+            os.set_inheritable(fd, False)
+        self._mem_fd, self._done_w, go0, go1, *self._fanout = fds
+        if len(self._fanout) != (4 if role == LEADER else 0):
+            raise ValueError(f"a {role} worker got {len(fds)} descriptors")
         self._map = mmap.mmap(self._mem_fd, layout.size)
         self._go = (go0, go1)
         self.views = SharedViews(layout, self._map)
@@ -326,6 +397,9 @@ class SharedServer:
         """Answer the current step: ``step(action_bytes)`` gives a StepAnswer or StepFailure."""
         v, lo, hi, lay = self.views, self.lo, self.hi, self.layout
         g = int(v.gen[0])
+        if self._fanout:  # a leader wakes its group first (its own step may be long)
+            _drain(self._fanout[(g + 1) % 2])  # step g - 1's byte: every member is past it
+            os.write(self._fanout[2 + g % 2], b"\x01")
         answer = step(v.actions[lo * lay.action_row : hi * lay.action_row])
         status, size, message = PLAIN, 0, b""
         if isinstance(answer, StepAnswer):
@@ -369,6 +443,6 @@ class SharedServer:
         self.views.release()
         with contextlib.suppress(BufferError, ValueError):
             self._map.close()
-        for fd in (*self._go, self._done_w, self._mem_fd):
+        for fd in (*self._go, self._done_w, self._mem_fd, *self._fanout):
             with contextlib.suppress(OSError):
                 os.close(fd)

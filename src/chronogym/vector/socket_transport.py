@@ -60,6 +60,8 @@ from chronogym.vector.shared_step import (
     SharedLayout,
     SharedServer,
     SharedStep,
+    usable_cpus,
+    wants_tree,
 )
 from chronogym.vector.wire_format import (
     ANSWER,
@@ -210,7 +212,8 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
                 if shared is not None:
                     shared.close()
                 shared = _attach(conn, size)
-                go_pollers = {fd: _poller(conn, fd) for fd in shared.go_fds}
+                if shared is not None:
+                    go_pollers = {fd: _poller(conn, fd) for fd in shared.go_fds}
                 continue
             if size > len(data):
                 data = memoryview(bytearray(size))
@@ -223,17 +226,26 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
             shared.close()
 
 
-def _attach(conn: socket.socket, size: int) -> SharedServer:
+def _attach(conn: socket.socket, size: int) -> SharedServer | None:
     """Take the shared step the driver hands over (its layout, then the block's and the
-    pipes' file descriptors); reply one byte."""
-    message, fds, _, _ = socket.recv_fds(conn, size, 4)
+    pipes' file descriptors); reply one byte: 1 taken, 0 not (the driver then closes the
+    socket and calls this worker through Ray)."""
+    message, fds, _, _ = socket.recv_fds(conn, size, 8)
     while len(message) < size:
         more = conn.recv(size - len(message))
         if not more:
             raise EOFError("the driver closed its socket while attaching a shared step")
         message += more
-    layout, w, gen = pickle.loads(message)  # trusted: own worker (its driver's private socket)
-    server = SharedServer(layout, w, gen, fds)
+    try:
+        layout, w, gen, role = pickle.loads(message)  # trusted: own worker (its driver's socket)
+        server = SharedServer(layout, w, gen, role, fds)
+    except Exception:
+        logger.warning("chronogym: no shared-memory step in this worker", exc_info=True)
+        for fd in fds:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        conn.sendall(b"\x00")
+        return None
     conn.sendall(b"\x01")
     return server
 
@@ -272,6 +284,9 @@ class SocketBackend(ActorBackend):
         super().__init__(*args, **kwargs)
         self.spin_us = check_spin_us(spin_us)
         self.shared_memory = shared_memory  # barrier steps through shared memory, if it can
+        #: Wake the workers in groups (None: when there are enough and each has a core,
+        #: :func:`~chronogym.vector.shared_step.wants_tree`); read at the first step.
+        self.wake_tree: bool | None = None
         self._shared: SharedStep | None = None
         self._dir: str | None = None
         self._socks: list[socket.socket | None] = []
@@ -407,8 +422,11 @@ class SocketBackend(ActorBackend):
     ) -> bool:
         """Make the block and attach every worker; False (and off for good) if one fails."""
         layout = SharedLayout(tuple(slices), actions.nbytes // slices[-1][1], obs_row)
+        tree = self.wake_tree
+        if tree is None:
+            tree = wants_tree(len(slices), usable_cpus())
         try:
-            self._shared = SharedStep(layout, self._dir, self.spin_us * 1e-6)
+            self._shared = SharedStep(layout, self._dir, self.spin_us * 1e-6, tree)
         except OSError as error:
             self.shared_memory = False
             logger.warning("chronogym: no shared-memory step (%s); using sockets", error)
