@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import signal
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,6 +32,12 @@ def synthetic_rollout(vec, steps: int) -> list:
     for _ in range(steps):
         out.append(vec.step(rng.uniform(-1, 1, (vec.num_envs, 2)).astype(np.float32)))
     return out
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def shared_steps(vec: RayVectorEnv) -> int:
@@ -143,6 +150,10 @@ def test_a_worker_that_cannot_attach_turns_the_shared_step_off(ray_cluster, monk
         assert_same_rollouts(vector_rollout(vec, 30), serial)
         assert vec._backend._shared is None and not vec._backend.shared_memory
         assert vec._backend.connected() == [True, False, True]
+        # worker 0 had attached: its go pipe hung up, and it went back to waiting, not spinning
+        busy = cpu_seconds(vec.worker_pids()[0])
+        time.sleep(2.0)
+        assert cpu_seconds(vec.worker_pids()[0]) - busy < 0.5
     finally:
         vec.close()
 

@@ -197,13 +197,18 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
         while True:
             poller = plain if shared is None else go_pollers[shared.go_fd]
             spinner.spin(poller)  # while stepping, the next request comes soon
-            ready = {fd for fd, _ in poller.poll()}
+            ready = dict(poller.poll())
             spinner.arrived()
-            if shared is not None and shared.go_fd in ready and shared.pending():
-                shared.serve(lambda actions: _step_bytes(group, actions, False))
-                if shared.on_socket:
-                    conn.sendall(shared.on_socket)
-                continue
+            if shared is not None and shared.go_fd in ready:
+                if shared.pending():
+                    shared.serve(lambda actions: _step_bytes(group, actions, False))
+                    if shared.on_socket:
+                        conn.sendall(shared.on_socket)
+                    continue
+                if ready[shared.go_fd] & select.POLLHUP:  # the driver closed the shared step
+                    shared.close()
+                    shared = None
+                    continue
             if conn.fileno() not in ready:
                 continue
             fill(conn, head, 0, REQUEST.size)
