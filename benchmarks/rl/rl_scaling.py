@@ -17,8 +17,15 @@ another in the training process (the paper's "no Ray" baseline, same env code).
 ``--engine chrono`` trains the same task in Project Chrono (PyChrono needed; results in
 ``results/rl_scaling_chrono/``), the engine the paper ran its quadruped in; ``--resume CKPT``
 starts every configuration from a checkpoint (e.g. a MuJoCo-trained ``best.pt``) instead of
-from scratch, with ``--finetune`` under the paper's conservative PPO settings. Checkpoints
-are not scored for ``best.pt`` here (``eval_episodes=0``): the budget is all training.
+from scratch, with ``--finetune`` under the paper's conservative PPO settings (results in
+``results/rl_scaling_chrono_finetune/``, checkpoints in ``runs/rl_scaling_chrono_finetune/``).
+Checkpoints are not scored for ``best.pt`` here (``eval_episodes=0``): the budget is all
+training.
+
+Each configuration's summary also has the first iteration whose mean episode reward reaches
+10, 15 and 20 (wall minutes, env steps, and the minutes as a ratio to the first
+configuration's), and whether its reward against env steps is the first's: with the same
+seed it is, whatever the backend, so the ratios are those of throughput alone.
 
 ``--check-walking`` then judges each configuration's checkpoints (one every ``--save-interval``
 iterations) in order, in the same engine, by the walking criteria v2 and v1 (as
@@ -47,6 +54,10 @@ ENGINE_FOLDERS = {
     "mujoco": (DEFAULT_OUT, DEFAULT_RUNS),
     "chrono": (RESULTS / "rl_scaling_chrono", Path("runs") / "rl_scaling_chrono"),
 }
+#: appended to both folders' names with ``--resume`` (e.g. ``results/rl_scaling_chrono_finetune/``)
+FINETUNE_SUFFIX = "_finetune"
+#: mean episode rewards whose first crossing each configuration's summary times
+REWARD_LEVELS = (10.0, 15.0, 20.0)
 DEFAULT_CONFIGS = ("ray-1", "ray-8", "ray-16", "serial-16")
 SHORT_MINUTES = 2.0
 FULL_MINUTES = 30.0
@@ -90,6 +101,48 @@ def run_config(
         "csv": csv_path.name,
         "checkpoint": str(result.checkpoint),
     }
+
+
+def reward_milestones(
+    rows: list[dict[str, float]], levels: tuple[float, ...] = REWARD_LEVELS
+) -> list[dict[str, Any]]:
+    """The first iteration whose mean episode reward reaches each of ``levels``: its wall
+    minutes and env steps (None: never)."""
+    out = []
+    for level in levels:
+        hit = next((r for r in rows if r["mean_reward"] >= level), None)
+        out.append({
+            "reward": level,
+            "minutes": hit["wall_time"] / 60 if hit else None,
+            "env_steps": int(hit["env_steps"]) if hit else None,
+        })  # fmt: skip
+    return out
+
+
+def same_curve(rows: list[dict[str, float]], base: list[dict[str, float]]) -> bool | None:
+    """Do two runs log the same mean reward at every env-step count both reached (None: no
+    count in common)? Same seed and settings give the same numbers on any backend."""
+    theirs = {r["env_steps"]: r["mean_reward"] for r in base}
+    shared = [(r["mean_reward"], theirs[r["env_steps"]]) for r in rows if r["env_steps"] in theirs]
+    if not shared:
+        return None
+    return all(a == b or (math.isnan(a) and math.isnan(b)) for a, b in shared)
+
+
+def compare_to_first(summaries: list[dict], out: Path) -> None:
+    """Add to each summary its reward milestones (:func:`reward_milestones`), each one's
+    minutes as a ratio to the first configuration's, and whether its reward curve against
+    env steps is the first's (:func:`same_curve`)."""
+    rows = {s["config"]: read_rows(out / s["csv"]) for s in summaries}
+    first = summaries[0]
+    for summary in summaries:
+        mine = summary["reward_milestones"] = reward_milestones(rows[summary["config"]])
+        for hit, base in zip(mine, reward_milestones(rows[first["config"]]), strict=True):
+            both = hit["minutes"] is not None and base["minutes"]
+            hit["minutes_ratio"] = hit["minutes"] / base["minutes"] if both else None
+        summary["same_reward_curve_as_first"] = same_curve(
+            rows[summary["config"]], rows[first["config"]]
+        )
 
 
 def read_rows(path: Path) -> list[dict[str, float]]:
@@ -249,6 +302,9 @@ def main() -> None:
     add_run_flags(parser, DEFAULT_CONFIGS, None, None)
     args = parser.parse_args()
     default_out, default_runs = ENGINE_FOLDERS[args.engine]
+    if args.resume is not None:  # a fine-tune is another experiment than a run from scratch
+        default_out = default_out.with_name(default_out.name + FINETUNE_SUFFIX)
+        default_runs = default_runs.with_name(default_runs.name + FINETUNE_SUFFIX)
     args.out = args.out or default_out
     args.runs = args.runs or default_runs
     minutes = args.minutes or (FULL_MINUTES if args.full else SHORT_MINUTES)
@@ -275,6 +331,7 @@ def main() -> None:
         args, minutes, f"{minutes:g} min, {start}", engine=args.engine, resume=args.resume,
         finetune=args.finetune, **extra,
     )  # fmt: skip
+    compare_to_first(summaries, args.out)
     if args.check_walking:
         time_to_walk(summaries, args.runs, args.engine)
         for s in summaries:
