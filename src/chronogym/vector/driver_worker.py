@@ -52,9 +52,9 @@ class DriverWorkerBackend:
     def step_timeout(self) -> float | None:
         return self.remote.step_timeout
 
-    def shared_step(self, *args: Any) -> None:
-        """No shared-memory step: the driver's own worker steps in this process (None)."""
-        return None
+    def shares_steps(self) -> bool:
+        """No shared-memory step: the driver's own worker steps in this process."""
+        return False
 
     def __getattr__(self, name: str) -> Any:
         """Anything else (``actors``, ``connected()``, ...) is the remote backend's."""

@@ -33,6 +33,7 @@ replacement's socket is connected again.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import os
@@ -191,6 +192,7 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
     head = memoryview(bytearray(REQUEST.size))
     data = memoryview(bytearray(256))
     plain, spinner = _poller(conn), AdaptiveSpin(spin_s)
+    step_shared = functools.partial(_step_bytes, group, timed=False)
     shared: SharedServer | None = None
     go_pollers: dict[int, select.poll] = {}
     try:
@@ -201,7 +203,7 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
             spinner.arrived()
             if shared is not None and shared.go_fd in ready:
                 if shared.pending():
-                    shared.serve(lambda actions: _step_bytes(group, actions, False))
+                    shared.serve(step_shared)
                     if shared.on_socket:
                         conn.sendall(shared.on_socket)
                     continue
@@ -414,13 +416,18 @@ class SocketBackend(ActorBackend):
         """A barrier step of every worker through shared memory
         (:mod:`chronogym.vector.shared_step`); None when that path is off or not every
         worker is connected here (then: one socket message per worker, or calls)."""
-        if not self.shared_memory or not all(s is not None for s in self._socks):
+        if not self.shares_steps():
             return None
         if self._shared is None and not self._open_shared(actions, slices, obs_row):
             return None
         assert self._shared is not None
         deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
         return self._shared.step(actions, self._socks, deadline, self._lost, self._read)
+
+    def shares_steps(self) -> bool:
+        """Can the barrier step go through shared memory (on, and every worker connected
+        here)? Cheap: asked before each step's actions are prepared for it."""
+        return self.shared_memory and all(s is not None for s in self._socks)
 
     def _open_shared(
         self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int

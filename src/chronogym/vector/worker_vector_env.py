@@ -146,6 +146,10 @@ class WorkerVectorEnv(VectorEnv):
         self._last_parts: list[Any] = [None] * self.num_workers  # obs rows of each worker
         self._in_flight = InFlight(backend, self._slices)
         self._packed = isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
+        #: bytes of one env's observation (the rows of a shared-memory step)
+        self._obs_row = 0
+        if self._packed:
+            self._obs_row = obs_space.dtype.itemsize * int(np.prod(obs_space.shape))  # type: ignore[union-attr]
         self._action_batches = {self.num_envs: self.action_space}  # batch_space by env count
         self.profile: StepProfile | None = None  # see profile_steps()
 
@@ -376,14 +380,13 @@ class WorkerVectorEnv(VectorEnv):
         """``step`` through the backend's shared memory, when it has it
         (:mod:`chronogym.vector.shared_step`): nothing per worker on the driver's side
         unless a worker has infos, restarts or an error to report. None: not available."""
-        shared_step = getattr(self._backend, "shared_step", None)
-        if shared_step is None:
+        shares_steps = getattr(self._backend, "shares_steps", None)
+        if shares_steps is None or not shares_steps():
             return None
         space = self.single_action_space
         array = prepare_box_action(actions, space, self.num_envs, self.invalid_action)  # type: ignore[arg-type]
-        obs_space = self.single_observation_space
-        obs_row = int(np.prod(obs_space.shape, dtype=np.int64)) * obs_space.dtype.itemsize  # type: ignore[union-attr]
-        answers = shared_step(np.ascontiguousarray(array), self._slices, obs_row)
+        array = np.ascontiguousarray(array)
+        answers = self._backend.shared_step(array, self._slices, self._obs_row)  # type: ignore[attr-defined]
         if answers is None:
             return None
         if answers.extras:  # infos, restarts, errors: each worker's answer, as over sockets
@@ -393,6 +396,7 @@ class WorkerVectorEnv(VectorEnv):
             if (error := self._env_error(seen)) is not None:
                 raise error from error.__cause__
             return self._join_results(workers, parts)
+        obs_space = self.single_observation_space
         kept = answers.obs.view(obs_space.dtype).reshape(self.num_envs, *obs_space.shape)  # type: ignore[misc]
         kept.flags.writeable = False
         self._last_parts = [kept[lo:hi] for lo, hi in self._slices]
