@@ -64,6 +64,13 @@ and EnvPool's batch mode, ``recv(min_envs=k, max_envs=k)`` with ``k = num_envs /
 exactly k envs per recv, the first ready (:func:`run_exact_batch`; skipped in a revision
 without ``max_envs``).
 
+``--pin-driver``: the driver's own core. Every process and thread (Ray's daemons, the
+workers, the driver's Ray threads) runs on the other cores, and the driver's main thread
+moves to the first core for the timed barrier steps only (stragglers and start-up are not
+pinned). The driver's CPU per step then holds its own work without the workers running
+between its instructions on the same core: what it pays with a core to itself, as on a
+machine with a core per worker. Compare ``b_cpu`` with a run without it.
+
 Output: tables, JSON (default ``benchmarks/results/scaling.json``) and a PNG beside it:
 E(W) per path and step cost (top), driver CPU per step (bottom), one column per envs per
 worker.
@@ -139,8 +146,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--quick", action="store_true", help="smoke run: W 1, 2, 8; 1 and 2 envs; 1 ms; short"
     )
+    parser.add_argument(
+        "--pin-driver",
+        action="store_true",
+        help="time the barrier with the driver on a core of its own (the rest on the others)",
+    )
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON; the PNG beside it")
     args = parser.parse_args(argv)
+    args.driver_cpus, args.other_cpus = None, None
+    if args.pin_driver:
+        cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+        if len(cpus) < 2:
+            parser.error(f"--pin-driver needs at least 2 usable CPUs; this process has {cpus}")
+        args.driver_cpus, args.other_cpus = cpus[:1], cpus[1:]
     if args.quick:
         args.workers, args.envs_per_worker, args.step_ms = [1, 2, 8], [1, 2], [1.0]
         args.seconds, args.min_steps, args.warmup = 0.3, 5, 3
@@ -258,10 +276,25 @@ def zero_actions(vec: Any) -> np.ndarray:
 
 
 def run_barrier(vec: Any, args: argparse.Namespace) -> tuple[int, float, float]:
-    """Barrier ``step``s: (vector steps, wall s, driver CPU s)."""
+    """Barrier ``step``s: (vector steps, wall s, driver CPU s); with ``--pin-driver``, the
+    calling thread on the driver's core meanwhile."""
     actions = zero_actions(vec)
-    timed = timed_loop(lambda: vec.step(actions), args.seconds, args.min_steps, args.warmup)
+    with driver_core(args):
+        timed = timed_loop(lambda: vec.step(actions), args.seconds, args.min_steps, args.warmup)
     return timed.steps, timed.wall_s, timed.cpu_s
+
+
+@contextlib.contextmanager
+def driver_core(args: argparse.Namespace) -> Iterator[None]:
+    """Move this thread to ``args.driver_cpus`` and back to the other cores (no-op unpinned)."""
+    if not args.driver_cpus:
+        yield
+        return
+    os.sched_setaffinity(0, args.driver_cpus)
+    try:
+        yield
+    finally:
+        os.sched_setaffinity(0, args.other_cpus)
 
 
 def run_recv_min_envs(
@@ -687,6 +720,8 @@ def sleep_calibration(step_ms: list[float], seconds: float) -> dict[str, float]:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.other_cpus:  # everything started from here on inherits the other cores
+        os.sched_setaffinity(0, args.other_cpus)
     wall = time.perf_counter()
     import ray
 
