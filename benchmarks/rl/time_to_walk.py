@@ -31,7 +31,9 @@ A configuration is as in ``train_throughput.py``
 plus ``+lever`` suffixes from :data:`VARIANTS` (PPO overrides and task arguments measured
 against the default, e.g. ``ray:32:0:48+init_noise``); ``ray:32:0:48`` is the default of
 ``chronogym train quadruped``. ``serial:32:0:48`` trains number for number the same
-(same envs, same update threads) and is how two runs share 2 cores side by side.
+(same envs, same update threads). Run one invocation at a time: two side by side on 2 cores
+took 7-9 s per iteration each against 0.65 s alone (2026-11-27), their 2-thread updates
+contending.
 ``--keep`` keeps the runs (configuration and seed) already in ``--out`` that this invocation
 does not run; ``--merge DIR ...`` adds the runs of other invocations' ``--out`` folders
 (later folders win) without training or checking anything. A configuration's settings list
