@@ -194,11 +194,10 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             )
             pids = [p.pid for p in vec.processes]
         else:
-            import ray
-
+            from benchmarks.vector.throughput_timing import start_ray
             from chronogym import RayVectorEnv
 
-            ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False)
+            start_ray()  # workers at chronogym's nice value, as RayVectorEnv's own Ray has
             vec = RayVectorEnv(
                 args.env, args.workers, envs_per_worker=1, env_kwargs=env_kwargs(args.step_ms)
             )

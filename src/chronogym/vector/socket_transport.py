@@ -414,10 +414,8 @@ class SocketBackend(ActorBackend):
         self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
     ) -> SharedAnswers | None:
         """A barrier step of every worker through shared memory
-        (:mod:`chronogym.vector.shared_step`); None when that path is off or not every
-        worker is connected here (then: one socket message per worker, or calls)."""
-        if not self.shares_steps():
-            return None
+        (:mod:`chronogym.vector.shared_step`), for a caller whose :meth:`shares_steps` said
+        yes; None when the block cannot be opened (then: one socket message per worker)."""
         if self._shared is None and not self._open_shared(actions, slices, obs_row):
             return None
         assert self._shared is not None
@@ -427,7 +425,7 @@ class SocketBackend(ActorBackend):
     def shares_steps(self) -> bool:
         """Can the barrier step go through shared memory (on, and every worker connected
         here)? Cheap: asked before each step's actions are prepared for it."""
-        return self.shared_memory and all(s is not None for s in self._socks)
+        return self.shared_memory and None not in self._socks
 
     def _open_shared(
         self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
