@@ -297,6 +297,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--workers", type=positive_int, default=2, help=argparse.SUPPRESS)
     parser.add_argument("--worker", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    for name in ("spin_us", "settle"):
+        if not getattr(args, name) >= 0:
+            parser.error(f"--{name.replace('_', '-')}={getattr(args, name)!r}: expected >= 0")
     if args.serve:
         serve(args.serve, args.env, args.worker, args.step_ms, args.spin_us * 1e-6)
         return
