@@ -215,6 +215,8 @@ def help_entries(text: str) -> dict[str, str]:
             flags = re.findall(r"(?:^|, )(--?[\w-]+)", invocation)  # "-h, --help": --help
             current = entries.setdefault(flags[-1] if flags else invocation.split()[0], [])
             current.append(help_text)
+            for flag in flags[:-1]:  # "--x, --no-x": both name the entry
+                entries[flag] = current
         elif in_section and current is not None:
             current.append(line)
     return {name: " ".join(" ".join(parts).split()) for name, parts in entries.items()}

@@ -79,7 +79,11 @@ def evaluate_engine(
     engine, options = CONFIGS[config]
     terrain = options.get("terrain", "rigid")
     env_id = check_engine(engine, terrain)
-    task_kwargs: dict[str, Any] = {} if terrain == "rigid" else {"terrain": terrain, "soil": soil}
+    from chronogym.tasks.quadruped.training import checkpoint_task_kwargs
+
+    task_kwargs: dict[str, Any] = checkpoint_task_kwargs(checkpoint)  # its observations
+    if terrain != "rigid":
+        task_kwargs |= {"terrain": terrain, "soil": soil}
     if "contact" in options:
         task_kwargs["settings"] = ChronoGo1Settings(contact=options["contact"])
     env = StepClock(gym.make(env_id, max_episode_steps=steps, **task_kwargs))

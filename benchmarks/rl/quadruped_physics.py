@@ -159,14 +159,16 @@ def policy_across_steps(checkpoint: Path, rows: list[Row]) -> list[dict]:
     """The walking criterion's summary of ``checkpoint`` at each elliptic, impratio-100 step."""
     from chronogym.rl.trainer import load_policy
     from chronogym.tasks.quadruped.evaluation import WalkingCriterion, evaluate, summarize
+    from chronogym.tasks.quadruped.training import checkpoint_task_kwargs
 
     criterion = WalkingCriterion()
     policy = load_policy(checkpoint)
+    observations = checkpoint_task_kwargs(checkpoint)  # what the policy was trained to read
     results = []
     for row in rows:
         if (row.cone, row.impratio) != ("elliptic", 100.0):
             continue
-        env = SimEnv(Go1VelocityTask(dt=row.dt, k=row.k))
+        env = SimEnv(Go1VelocityTask(dt=row.dt, k=row.k, **observations))
         episodes = evaluate(
             env,
             policy,

@@ -262,15 +262,17 @@ def time_to_walk(summaries: list[dict], runs: Path, engine: str) -> None:
 
     from benchmarks.rl.time_to_walk import evaluate_run
     from chronogym.tasks.quadruped.engines import ENV_IDS, env_kwargs_for
+    from chronogym.tasks.quadruped.training import checkpoint_task_kwargs
     from chronogym.tasks.quadruped.walking import WalkingCriterion, WalkingCriterionV1
 
-    kwargs = env_kwargs_for("rigid", {}, engine)
     for summary in summaries:
         run = runs / summary["config"]
+        # the observations the policy was trained on, read from its checkpoint as play does
+        kwargs = env_kwargs_for("rigid", checkpoint_task_kwargs(summary["checkpoint"]), engine)
         rows, ends, _ = evaluate_run(
             run,
             [WalkingCriterion(), WalkingCriterionV1()],
-            lambda: gym.make(ENV_IDS[engine], **kwargs),
+            lambda kwargs=kwargs: gym.make(ENV_IDS[engine], **kwargs),
         )
         for suffix, key in (("_v2", "v2_walks"), ("_v1", "walks")):
             walked = [r for r in rows if r[key]]
@@ -345,8 +347,15 @@ def main() -> None:
     write_results(
         summaries, args.out, "rl_scaling", title, minutes_per_config=minutes, seed=args.seed,
         engine=args.engine, start=start, save_interval=args.save_interval,
-        pychrono_commit=args.pychrono_commit,
+        pychrono_commit=args.pychrono_commit, task=quadruped_task(),
     )  # fmt: skip
+
+
+def quadruped_task() -> dict[str, Any]:
+    """The task settings training adds by default (``QUADRUPED_TASK``), for the record."""
+    from chronogym.tasks.quadruped.training import QUADRUPED_TASK
+
+    return dict(QUADRUPED_TASK)
 
 
 def fmt_minutes(value: float | None) -> str:

@@ -31,7 +31,9 @@ A configuration is as in ``train_throughput.py``
 plus ``+lever`` suffixes from :data:`VARIANTS` (PPO overrides and task arguments measured
 against the default, e.g. ``ray:32:0:48+init_noise``); ``ray:32:0:48`` is the default of
 ``chronogym train quadruped``. ``serial:32:0:48`` trains number for number the same
-(same envs, same update threads). Run one invocation at a time: two side by side on 2 cores
+(same envs, same update threads). The default's policy observes the base's linear velocity
+since 2026-11-28; the runs from before, on the paper's 45 observations, are labelled
+``+obs45``. Run one invocation at a time: two side by side on 2 cores
 took 7-9 s per iteration each against 0.65 s alone (2026-11-27), their 2-thread updates
 contending.
 ``--keep`` keeps the runs (configuration and seed) already in ``--out`` that this invocation
@@ -97,6 +99,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # speed changes per episode), and twice the reward weight of linear-velocity tracking.
     "resample5": {"task": {"commands": {"resample_s": 5.0}}},
     "track2": {"task": {"rewards": {"tracking_lin_vel": 2.0}}},
+    # The paper's 45 observations: the policy does not observe the base's linear velocity,
+    # which it has since 2026-11-28 (``QUADRUPED_TASK``). Every run before then had 45.
+    "obs45": {"task": {"observe_base_lin_vel": False}},
 }
 
 
@@ -115,10 +120,11 @@ def split_config(text: str) -> tuple[str, list[str]]:
 def variant_settings(text: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """The PPO overrides and task arguments of a configuration's variants."""
     from chronogym.rl.config import _merge
+    from chronogym.tasks.quadruped.training import QUADRUPED_TASK
 
     base, variants = split_config(text)
     ppo: dict[str, Any] = {}
-    task: dict[str, Any] = dict(parse_config(base).task_kwargs())
+    task: dict[str, Any] = {**QUADRUPED_TASK, **parse_config(base).task_kwargs()}
     for name in variants:
         _merge(ppo, VARIANTS[name].get("ppo", {}))
         _merge(task, VARIANTS[name].get("task", {}))
@@ -204,10 +210,12 @@ def ends_record(envs: list[Any], path: Path, criteria: list[Any]) -> dict[str, A
 
 
 def config_env(config: str) -> Callable[[], Any]:
-    """Makes the MuJoCo Go1 env on the physics step ``config`` trained with, as ``play`` does."""
+    """Makes the MuJoCo Go1 env on the physics step ``config`` trained with, and with the
+    policy's observations (``observe_base_lin_vel``), as ``play`` does."""
     from chronogym.tasks.quadruped.engines import ENV_ID
 
     kwargs = parse_config(split_config(config)[0]).task_kwargs()
+    kwargs["observe_base_lin_vel"] = variant_settings(config)[1]["observe_base_lin_vel"]
     return lambda: gym.make(ENV_ID, **kwargs)
 
 

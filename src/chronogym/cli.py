@@ -281,6 +281,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         driver_worker=args.driver_worker,
         eval_episodes=args.eval_episodes,
         env_errors=args.env_errors,
+        task_kwargs=(
+            None
+            if args.observe_base_lin_vel is None
+            else {"observe_base_lin_vel": args.observe_base_lin_vel}
+        ),
     )
     row = result.last_row
     print(

@@ -248,6 +248,14 @@ def add_train(sub: Any) -> None:
     tr.add_argument("--resume", help="checkpoint to continue from (default: a fresh policy)")
     add_quadruped_world(tr)
     tr.add_argument("--finetune", action="store_true", help="conservative PPO (paper's transfer)")
+    tr.add_argument(
+        "--observe-base-lin-vel",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the policy also observes the base's linear velocity: 48 observations, as "
+        "legged_gym's and Isaac Lab's (--no-observe-base-lin-vel: the paper's 45) "
+        "(default: on, or what the --resume checkpoint was trained with)",
+    )
     add_int(tr, "--seed", 0, "seed of the envs and the learner", least=0)
     add_int(tr, "--torch-threads", 1, "torch CPU threads (learner)")
     tr.add_argument(

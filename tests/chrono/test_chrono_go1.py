@@ -78,6 +78,16 @@ def rollout(env: gym.Env, seed: int, steps: int = 25) -> np.ndarray:
     return np.concatenate(rows)
 
 
+def test_observes_the_base_velocity_when_asked(chrono):
+    env, rows = stand(CHRONO_ID, steps=5, observe_base_lin_vel=True)
+    try:
+        assert rows[-1].shape == (48,) and env.observation_space.contains(rows[-1])
+        velocity = env.unwrapped.task.base_lin_vel
+        np.testing.assert_allclose(rows[-1][45:], velocity * 2.0, rtol=1e-6)
+    finally:
+        env.close()
+
+
 def test_reset_reproduces_an_episode(chrono):
     env = gym.make(CHRONO_ID)
     first = rollout(env, 3)

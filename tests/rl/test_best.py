@@ -209,10 +209,10 @@ def test_a_checkpoint_resumes_with_the_critic_it_was_trained_with(
     first = train_quadruped(
         tmp_path, iterations=1, task_kwargs={**SHORT, "privileged_critic": trained_with}, **common
     )
-    assert quadruped.critic_input_size(first.checkpoint) == (49 if trained_with else 45)
+    assert quadruped.critic_input_size(first.checkpoint) == (49 if trained_with else 48)
     # whatever the training default says now, the resumed run reads what the critic was built for
     monkeypatch.setattr(quadruped, "QUADRUPED_TASK", {"privileged_critic": not trained_with})
     second = train_quadruped(
         tmp_path, iterations=1, resume=first.checkpoint, task_kwargs=SHORT, **common
     )
-    assert quadruped.critic_input_size(second.checkpoint) == (49 if trained_with else 45)
+    assert quadruped.critic_input_size(second.checkpoint) == (49 if trained_with else 48)

@@ -9,6 +9,8 @@ import sys
 
 import pytest
 
+from chronogym.rl.checkpoint import read_checkpoint
+from chronogym.tasks.quadruped.training import input_size
 from chronogym.tasks.quadruped.walking import load_traces
 
 pytest.importorskip("rsl_rl")
@@ -21,9 +23,25 @@ def run_cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout, env=env)
 
 
+def actor_inputs(path) -> int | None:
+    return input_size(read_checkpoint(path, "path"), "actor_state_dict")
+
+
 def iterations(out) -> list[int]:
     with open(out / "progress.csv", newline="") as handle:
         return [int(row["iteration"]) for row in csv.DictReader(handle)]
+
+
+def test_the_papers_observation_on_request(tmp_path):
+    out = tmp_path / "run"
+    trained = run_cli(
+        "train", "quadruped", "--num-envs", "2", "--backend", "serial", "--iterations", "1",
+        "--eval-episodes", "0", "--no-observe-base-lin-vel", "--out", str(out),
+    )  # fmt: skip
+    assert trained.returncode == 0, trained.stderr[-3000:]
+    assert actor_inputs(out / "latest.pt") == 45
+    played = run_cli("play", "quadruped", str(out / "latest.pt"), "--steps", "5")
+    assert played.returncode == 0, played.stderr[-3000:]  # play makes the 45-value env
 
 
 def test_train_resume_and_play_on_the_serial_backend(tmp_path):
@@ -40,6 +58,8 @@ def test_train_resume_and_play_on_the_serial_backend(tmp_path):
     assert f"best checkpoint {out / 'best.pt'} = model_1.pt (iteration 1" in first.stdout
     assert "/7 pass (v2)" in first.stdout
     assert (out / "best.pt").read_bytes() == (out / "model_1.pt").read_bytes()
+    # the policy reads the 45 observations and the base's velocity (the training default)
+    assert actor_inputs(out / "latest.pt") == 48
 
     resumed = run_cli(
         "train", "quadruped", "--num-envs", "2", "--backend", "serial", "--iterations", "1",

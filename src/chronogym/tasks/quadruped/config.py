@@ -38,6 +38,9 @@ OBS_SLICES: dict[str, tuple[int, int]] = {
     "last_action": (33, 45),
 }
 OBS_DIM = 45
+#: Scale of the base's linear velocity (body frame) where an observation holds it: the
+#: policy's with ``observe_base_lin_vel``, the critic's with ``privileged_critic``.
+LIN_VEL_SCALE = 2.0
 ACTION_DIM = 12
 
 
@@ -249,6 +252,11 @@ class Go1TaskConfig:
     #: asymmetric actor-critic, as legged_gym's and MuJoCo Playground's); the policy's 45
     #: observations do not change.
     privileged_critic: bool = False
+    #: Append the base's linear velocity (body frame, x ``LIN_VEL_SCALE``) to the policy's
+    #: observation, which then has 48 values, the first 45 as without it. legged_gym, Isaac Lab
+    #: and MuJoCo Playground all give their policies this velocity (a state estimator's on the
+    #: robot); off, the policy infers its speed from its joints.
+    observe_base_lin_vel: bool = False
     #: Servo stiffness [N m/rad]; ``None``: the model's (100).
     kp: float | None = 35.0
     #: Servo damping [N m s/rad]; ``None``: the model's (2).
@@ -293,4 +301,5 @@ class Go1TaskConfig:
             "reset_base_velocity", self.reset_base_velocity, low=0, high=2, expected="in [0, 2] m/s"
         )
         _check_flag("privileged_critic", self.privileged_critic)
+        _check_flag("observe_base_lin_vel", self.observe_base_lin_vel)
         _check_flag("only_positive_rewards", self.only_positive_rewards)

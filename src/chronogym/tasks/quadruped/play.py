@@ -17,6 +17,7 @@ from chronogym.engines.mujoco import check_headless_gl
 from chronogym.rl.checkpoint import load_policy
 from chronogym.tasks.quadruped.engines import check_engine, env_kwargs_for
 from chronogym.tasks.quadruped.evaluation import DEFAULT_COMMANDS, evaluate, summarize
+from chronogym.tasks.quadruped.training import checkpoint_task_kwargs
 from chronogym.tasks.quadruped.walking import WalkingCriterion, judge, save_traces
 
 
@@ -83,6 +84,8 @@ def play_quadruped(
         if path is not None and Path(path).suffix.lower() != suffix:
             raise ValueError(f"{name}={str(path)!r}: expected a file name ending in {suffix}")
     env_id = check_engine(engine, terrain)
+    # the observations the policy was trained on (its input size), unless task_kwargs says
+    task_kwargs = {**checkpoint_task_kwargs(checkpoint), **(task_kwargs or {})}
     render_mode = "rgb_array" if video is not None else None
     if video is not None:
         check_can_render()

@@ -44,9 +44,14 @@ TRAINING_ONLY = (
     "reset_base_velocity",
 )
 
-#: Task settings of the documented Go1 training, under the caller's ``task_kwargs``
-#: (training only: ``play`` and the checkpoint evaluation run the task as it is).
-QUADRUPED_TASK: dict[str, Any] = {}
+#: Task settings of the documented Go1 training, under the caller's ``task_kwargs``. The
+#: policy observes the base's linear velocity (48 observations: the paper's 45, then that
+#: velocity), as legged_gym's, Isaac Lab's and MuJoCo Playground's policies do: with it 6 of 8
+#: seeds walked by criterion v2 within 1.5 M env steps, without it none of 5
+#: (``docs/performance/rl.md``, "time_to_walk.py"). ``observe_base_lin_vel=False`` trains
+#: on the paper's 45. The checkpoint evaluation runs the task with this setting, and ``play``
+#: and a resumed run read it from the checkpoint (:func:`checkpoint_task_kwargs`).
+QUADRUPED_TASK: dict[str, Any] = {"observe_base_lin_vel": True}
 
 #: PPO settings of the documented Go1 run, on top of :func:`ppo_train_config`'s legged_gym
 #: defaults. Few envs (32 on a laptop instead of 4096 on a GPU) make each minibatch small and
@@ -214,23 +219,42 @@ def train_quadruped(
 def training_task_kwargs(
     task_kwargs: dict[str, Any] | None, resume: str | Path | None
 ) -> dict[str, Any]:
-    """``QUADRUPED_TASK`` under ``task_kwargs``; a resumed checkpoint keeps the critic
-    observation it was trained with (``privileged_critic`` read from its critic's input
-    size), unless ``task_kwargs`` sets it."""
+    """``QUADRUPED_TASK`` under ``task_kwargs``; a resumed checkpoint keeps the observations
+    it was trained with (:func:`checkpoint_task_kwargs`), unless ``task_kwargs`` sets them."""
+    trained = {} if resume is None else checkpoint_task_kwargs(resume, critic=True, name="resume")
+    return {**QUADRUPED_TASK, **trained, **(task_kwargs or {})}
+
+
+def checkpoint_task_kwargs(
+    checkpoint: str | Path, critic: bool = False, name: str = "checkpoint"
+) -> dict[str, Any]:
+    """The task settings that a checkpoint's input sizes tell: ``observe_base_lin_vel``
+    (its policy reads 48 observations, not 45) and, with ``critic``, ``privileged_critic``
+    (its critic reads more than its policy). Empty where a size is not found. ``name``: the
+    argument that gave ``checkpoint``, for the error if it is no checkpoint."""
     from chronogym.tasks.quadruped.config import OBS_DIM  # imports MuJoCo (the Go1 model)
 
-    kwargs = {**QUADRUPED_TASK, **(task_kwargs or {})}
-    if resume is not None and "privileged_critic" not in (task_kwargs or {}):
-        size = critic_input_size(resume)
-        if size is not None:
-            kwargs["privileged_critic"] = size > OBS_DIM
+    saved = read_checkpoint(checkpoint, name)
+    kwargs: dict[str, Any] = {}
+    actor = input_size(saved, "actor_state_dict")
+    if actor is not None:
+        kwargs["observe_base_lin_vel"] = actor == OBS_DIM + 3
+    size = input_size(saved, "critic_state_dict")
+    if critic and size is not None:
+        kwargs["privileged_critic"] = size > (actor or OBS_DIM)
     return kwargs
 
 
 def critic_input_size(checkpoint: str | Path) -> int | None:
     """The number of observations the checkpoint's critic reads (None: not found)."""
-    critic = read_checkpoint(checkpoint, "resume").get("critic_state_dict") or {}
-    weight = critic.get("mlp.0.weight")
+    return input_size(read_checkpoint(checkpoint, "resume"), "critic_state_dict")
+
+
+def input_size(saved: dict[str, Any], network: str) -> int | None:
+    """The number of inputs of the first layer of ``network`` (``"actor_state_dict"`` or
+    ``"critic_state_dict"``) in a checkpoint's dict (None: not found)."""
+    state = saved.get(network) or {}
+    weight = state.get("mlp.0.weight")
     return int(weight.shape[1]) if weight is not None and weight.ndim == 2 else None
 
 
@@ -238,11 +262,13 @@ def walking_evaluator(
     engine: str, terrain: str, task_kwargs: dict[str, Any] | None, episodes: int
 ) -> WalkingEvaluator:
     """A :class:`~chronogym.tasks.quadruped.evaluation.WalkingEvaluator` on the training's
-    task as ``chronogym play`` makes it (the ``TRAINING_ONLY`` settings left out): the
-    walking criterion's groups, ``episodes`` episodes each (seeds 0, 1, ...); in episodes
-    shorter than twice the criterion's switch time, the switch comes half-way through."""
+    task as ``chronogym play`` makes it (``QUADRUPED_TASK`` under ``task_kwargs``, the
+    ``TRAINING_ONLY`` settings left out): the walking criterion's groups, ``episodes``
+    episodes each (seeds 0, 1, ...); in episodes shorter than twice the criterion's switch
+    time, the switch comes half-way through."""
     env_id = ENV_IDS[engine]
-    physics = {k: v for k, v in (task_kwargs or {}).items() if k not in TRAINING_ONLY}
+    trained = {**QUADRUPED_TASK, **(task_kwargs or {})}
+    physics = {k: v for k, v in trained.items() if k not in TRAINING_ONLY}
     kwargs = env_kwargs_for(terrain, physics, engine)
     evaluator = WalkingEvaluator(
         lambda: gym.make(env_id, **kwargs), WalkingCriterion(episodes=episodes)

@@ -55,6 +55,7 @@ from gymnasium import spaces
 from chronogym.task import Task
 from chronogym.tasks.quadruped.config import (
     ACTION_DIM,
+    LIN_VEL_SCALE,
     OBS_ANG_VEL,
     OBS_COMMAND,
     OBS_DIM,
@@ -161,7 +162,8 @@ class Go1VelocityBase(Task, ABC):
     def _setup_tracking(self) -> None:
         """Spaces and buffers both engines share (``setup``, after the engine's own)."""
         config = self.config
-        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
+        obs_dim = OBS_DIM + 3 if config.observe_base_lin_vel else OBS_DIM
+        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(obs_dim,), dtype=np.float32)
         self.action_space = spaces.Box(
             -config.action_clip, config.action_clip, shape=(ACTION_DIM,), dtype=np.float32
         )
@@ -367,7 +369,11 @@ class Go1VelocityBase(Task, ABC):
         self._read_state(raw)
         raw[OBS_COMMAND] = self.command
         raw[OBS_LAST_ACTION] = self.last_action
-        return (raw * self._obs_scale).astype(np.float32)
+        obs = (raw * self._obs_scale).astype(np.float32)
+        if self.config.observe_base_lin_vel:
+            velocity = (self.base_lin_vel * LIN_VEL_SCALE).astype(np.float32)
+            return np.concatenate([obs, velocity])
+        return obs
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:
         self._update_contacts()
@@ -546,5 +552,5 @@ class Go1VelocityBase(Task, ABC):
         observations, the base's linear velocity x 2 and its height error x 10 (float32)."""
         height = (self._base_height() - self.config.base_height_target) * 10.0
         return np.concatenate(
-            [self._obs_raw * self._obs_scale, self.base_lin_vel * 2.0, [height]]
+            [self._obs_raw * self._obs_scale, self.base_lin_vel * LIN_VEL_SCALE, [height]]
         ).astype(np.float32)
