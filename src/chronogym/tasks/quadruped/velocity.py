@@ -168,8 +168,11 @@ class Go1VelocityBase(Task, ABC):
             -config.action_clip, config.action_clip, shape=(ACTION_DIM,), dtype=np.float32
         )
         self.control_dt = self.dt * self.k
-        self._obs_scale = observation_scale()
-        self._obs_raw = np.zeros(OBS_DIM)
+        scale = observation_scale()
+        if config.observe_base_lin_vel:  # the base's velocity after the 45, in the same buffer
+            scale = np.concatenate([scale, np.full(3, LIN_VEL_SCALE)])
+        self._obs_scale = scale
+        self._obs_raw = np.zeros(obs_dim)
         self.base_lin_vel = np.zeros(3)
         self.command = np.zeros(3)
         self.last_action = np.zeros(ACTION_DIM)
@@ -369,11 +372,9 @@ class Go1VelocityBase(Task, ABC):
         self._read_state(raw)
         raw[OBS_COMMAND] = self.command
         raw[OBS_LAST_ACTION] = self.last_action
-        obs = (raw * self._obs_scale).astype(np.float32)
         if self.config.observe_base_lin_vel:
-            velocity = (self.base_lin_vel * LIN_VEL_SCALE).astype(np.float32)
-            return np.concatenate([obs, velocity])
-        return obs
+            raw[OBS_DIM:] = self.base_lin_vel
+        return (raw * self._obs_scale).astype(np.float32)
 
     def reward(self, action: np.ndarray, obs: np.ndarray) -> float:
         self._update_contacts()
@@ -552,5 +553,9 @@ class Go1VelocityBase(Task, ABC):
         observations, the base's linear velocity x 2 and its height error x 10 (float32)."""
         height = (self._base_height() - self.config.base_height_target) * 10.0
         return np.concatenate(
-            [self._obs_raw * self._obs_scale, self.base_lin_vel * LIN_VEL_SCALE, [height]]
+            [
+                self._obs_raw[:OBS_DIM] * self._obs_scale[:OBS_DIM],
+                self.base_lin_vel * LIN_VEL_SCALE,
+                [height],
+            ]
         ).astype(np.float32)
