@@ -99,6 +99,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # speed changes per episode), and twice the reward weight of linear-velocity tracking.
     "resample5": {"task": {"commands": {"resample_s": 5.0}}},
     "track2": {"task": {"rewards": {"tracking_lin_vel": 2.0}}},
+    # A second, narrow linear-velocity kernel (2026-11-28), for the two seeds of the default
+    # that miss v2's rise time: exp(-e^2/0.05) beside the default exp(-e^2/0.25), weight 1.
+    "fine": {"task": {"rewards": {"tracking_lin_vel_fine": 1.0}}},
     # The paper's 45 observations: the policy does not observe the base's linear velocity,
     # which it has since 2026-11-28 (``QUADRUPED_TASK``). Every run before then had 45.
     "obs45": {"task": {"observe_base_lin_vel": False}},

@@ -105,6 +105,7 @@ def test_an_unknown_keyword_is_a_type_error_naming_it(task_class):
         ({"base_height_target": True}, r"base_height_target=True: expected a finite float > 0"),
         ({"kd": float("nan")}, r"kd=nan: expected None \(the model's\) or a float >= 0"),
         ({"tracking_sigma": 0.0}, r"tracking_sigma=0.0: expected a finite float > 0"),
+        ({"fine_tracking_sigma": -1.0}, r"fine_tracking_sigma=-1.0: expected a finite float > 0"),
         ({"air_time_threshold": 5.0}, r"air_time_threshold=5.0: expected in \[0, 5\) s"),
         ({"only_positive_rewards": "yes"}, r"only_positive_rewards='yes': expected True or"),
     ],

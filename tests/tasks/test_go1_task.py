@@ -138,6 +138,19 @@ def test_tracking_sigma_sets_the_width_of_both_kernels():
     assert lin[0.1] < lin[0.25]
 
 
+def test_fine_tracking_kernel_is_off_by_default_and_narrower_when_on():
+    assert RewardWeights().tracking_lin_vel_fine == 0.0
+    assert "tracking_lin_vel_fine" not in _terms(_env().task)
+    rewards = RewardWeights(tracking_lin_vel_fine=2.0)
+    for sigma in (0.05, 0.02):
+        task = _env(rewards=rewards, fine_tracking_sigma=sigma).task
+        _set_state(task, lin_vel=(0.6, -0.2, 0), quat=(1, 0, 0, 0))  # 0.1 m/s off in x
+        terms = _terms(task)
+        dt = task.control_dt
+        assert terms["tracking_lin_vel_fine"] == pytest.approx(2.0 * dt * math.exp(-0.01 / sigma))
+        assert terms["tracking_lin_vel_fine"] / 2.0 < terms["tracking_lin_vel"]
+
+
 @pytest.mark.parametrize(
     ("term", "state"),
     [

@@ -36,6 +36,7 @@ PROGRESS_METRICS: dict[str, str] = {"x_mse": "/metrics/x_vel_mse", "y_mse": "/me
 #: which run the task as ``chronogym play`` does.
 TRAINING_ONLY = (
     "tracking_sigma",
+    "fine_tracking_sigma",
     "privileged_critic",
     "commands",
     "randomization",

@@ -449,6 +449,7 @@ class Go1VelocityBase(Task, ABC):
         return {
             "tracking_lin_vel": self._reward_tracking_lin_vel,
             "tracking_ang_vel": self._reward_tracking_ang_vel,
+            "tracking_lin_vel_fine": self._reward_tracking_lin_vel_fine,
             "lin_vel_z": self._reward_lin_vel_z,
             "ang_vel_xy": self._reward_ang_vel_xy,
             "orientation": self._reward_orientation,
@@ -472,6 +473,13 @@ class Go1VelocityBase(Task, ABC):
         """exp(-(w_z - cmd_wz)^2 / sigma)."""
         error = motion.ang_vel[2] - motion.command[2]
         return math.exp(-(error**2) / self.config.tracking_sigma)
+
+    def _reward_tracking_lin_vel_fine(self, motion: BaseMotion) -> float:
+        """exp(-|v_xy - cmd_xy|^2 / fine_tracking_sigma)."""
+        vx, vy, _ = motion.lin_vel
+        cmd_x, cmd_y, _ = motion.command
+        error2 = (vx - cmd_x) ** 2 + (vy - cmd_y) ** 2
+        return math.exp(-error2 / self.config.fine_tracking_sigma)
 
     def _reward_lin_vel_z(self, motion: BaseMotion) -> float:
         """v_z^2."""
