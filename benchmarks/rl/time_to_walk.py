@@ -31,11 +31,13 @@ A configuration is as in ``train_throughput.py``
 plus ``+lever`` suffixes from :data:`VARIANTS` (PPO overrides and task arguments measured
 against the default, e.g. ``ray:32:0:48+init_noise``); ``ray:32:0:48`` is the default of
 ``chronogym train quadruped``. ``serial:32:0:48`` trains number for number the same
-(same envs, same update threads). The default's policy observes the base's linear velocity
-since 2026-11-28; the runs from before, on the paper's 45 observations, are labelled
-``+obs45``. Run one invocation at a time: two side by side on 2 cores
-took 7-9 s per iteration each against 0.65 s alone (2026-11-27), their 2-thread updates
-contending.
+(same envs, same update threads). The default (``QUADRUPED_TASK``) changed twice on
+2026-11-28, and the runs from before are relabelled: its policy observes the base's linear
+velocity (the runs on the paper's 45 observations and the paper's reward are ``+obs45``), and
+later that day its reward got a second, narrow linear-velocity kernel (the runs without it
+are ``+nofine``). Run one invocation at a time, or two with ``--update-threads 1``: two side
+by side on 2 cores took 7-9 s per iteration each against 0.65 s alone (2026-11-27), their
+2-thread updates contending.
 ``--keep`` keeps the runs (configuration and seed) already in ``--out`` that this invocation
 does not run; ``--merge DIR ...`` adds the runs of other invocations' ``--out`` folders
 (later folders win) without training or checking anything. A configuration's settings list
@@ -46,6 +48,7 @@ stays in ``earlier_machines``.
 from __future__ import annotations
 
 import argparse
+import copy
 import csv
 import dataclasses
 import json
@@ -99,12 +102,13 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # speed changes per episode), and twice the reward weight of linear-velocity tracking.
     "resample5": {"task": {"commands": {"resample_s": 5.0}}},
     "track2": {"task": {"rewards": {"tracking_lin_vel": 2.0}}},
-    # A second, narrow linear-velocity kernel (2026-11-28), for the two seeds of the default
-    # that miss v2's rise time: exp(-e^2/0.05) beside the default exp(-e^2/0.25), weight 1.
-    "fine": {"task": {"rewards": {"tracking_lin_vel_fine": 1.0}}},
-    # The paper's 45 observations: the policy does not observe the base's linear velocity,
-    # which it has since 2026-11-28 (``QUADRUPED_TASK``). Every run before then had 45.
-    "obs45": {"task": {"observe_base_lin_vel": False}},
+    # Without the second, narrow linear-velocity kernel, exp(-e^2/0.05) beside the paper's
+    # exp(-e^2/0.25), which the default has since 2026-11-28 (``QUADRUPED_TASK``); tried
+    # first as ``+fine`` on the two seeds that missed v2's rise time.
+    "nofine": {"task": {"rewards": {"tracking_lin_vel_fine": 0.0}}},
+    # The default until 2026-11-28: the paper's 45 observations (no linear velocity of the
+    # base) and the paper's reward (one linear-velocity kernel). Every run before then.
+    "obs45": {"task": {"observe_base_lin_vel": False, "rewards": {"tracking_lin_vel_fine": 0.0}}},
 }
 
 
@@ -127,7 +131,7 @@ def variant_settings(text: str) -> tuple[dict[str, Any], dict[str, Any]]:
 
     base, variants = split_config(text)
     ppo: dict[str, Any] = {}
-    task: dict[str, Any] = {**QUADRUPED_TASK, **parse_config(base).task_kwargs()}
+    task: dict[str, Any] = copy.deepcopy({**QUADRUPED_TASK, **parse_config(base).task_kwargs()})
     for name in variants:
         _merge(ppo, VARIANTS[name].get("ppo", {}))
         _merge(task, VARIANTS[name].get("task", {}))
@@ -143,10 +147,16 @@ def variant_settings(text: str) -> tuple[dict[str, Any], dict[str, Any]]:
 
 
 def train_run(
-    config: str, seed: int, budget: dict[str, float], save_interval: int, runs: Path
+    config: str,
+    seed: int,
+    budget: dict[str, float],
+    save_interval: int,
+    runs: Path,
+    update_threads: int | None = None,
 ) -> Path:
     """Train one run from scratch; its folder (``progress.csv``, ``model_<it>.pt``).
-    ``budget``: ``{"env_steps": n}`` or ``{"minutes": m}``."""
+    ``budget``: ``{"env_steps": n}`` or ``{"minutes": m}``; ``update_threads`` (None: the
+    configuration's) replaces the configuration's torch threads of the PPO update."""
     from chronogym.tasks.quadruped.training import quadruped_train_config, train_quadruped
 
     c = parse_config(split_config(config)[0])
@@ -164,7 +174,8 @@ def train_run(
         limit = {"minutes": budget["minutes"]}
     train_quadruped(
         out, num_envs=c.num_envs, backend=c.backend, seed=seed, policy_lag=c.policy_lag,
-        train_cfg=cfg, task_kwargs=task, update_threads=c.update_threads, **limit,
+        train_cfg=cfg, task_kwargs=task, update_threads=update_threads or c.update_threads,
+        **limit,
     )  # fmt: skip
     return out
 
@@ -388,6 +399,13 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--merge", nargs="+", type=Path, default=[], metavar="DIR",
                         help="only merge these result folders into --out")  # fmt: skip
+    parser.add_argument(
+        "--update-threads",
+        type=int,
+        help="torch threads of each PPO update, over the configuration's (default: the "
+        "configuration's, else up to 8): 1 lets two runs share 2 cores; a serial run trained "
+        "the same weights with 1 and 2 (checked over 4 iterations)",
+    )
     parser.add_argument("--runs", type=Path, default=RUNS)
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args(argv)
@@ -397,6 +415,8 @@ def main(argv: list[str] | None = None) -> None:
     except argparse.ArgumentTypeError as error:
         parser.error(str(error))
     budget = {"minutes": args.minutes} if args.minutes else {"env_steps": args.env_steps}
+    if args.update_threads is not None and args.update_threads < 1:
+        parser.error(f"--update-threads={args.update_threads}: expected an integer >= 1")
     if not next(iter(budget.values())) > 0 or args.save_interval < 1:
         parser.error(f"budget {budget}, --save-interval={args.save_interval}: expected a "
                      "budget > 0 and an interval >= 1")  # fmt: skip
@@ -412,7 +432,7 @@ def main(argv: list[str] | None = None) -> None:
     if not args.evaluate_only:
         for config, seed in runs:
             print(f"training {config} seed {seed} for {budget}", flush=True)
-            train_run(config, seed, budget, args.save_interval, args.runs)
+            train_run(config, seed, budget, args.save_interval, args.runs, args.update_threads)
     missing = [run_name(c, s) for c, s in runs if not checkpoints_exist(args.runs / run_name(c, s))]
     if missing:
         parser.error(f"no progress.csv and checkpoints in {args.runs} for: {', '.join(missing)}")

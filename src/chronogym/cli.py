@@ -240,6 +240,16 @@ def last_fail_reason(study: Any, lines: int = 3) -> str:
     return "\n    ".join(["", *str(reason).strip().splitlines()[-lines:]]) or "none recorded"
 
 
+def train_task_options(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The Go1 task arguments ``train`` options set over the training's defaults (None: none)."""
+    options: dict[str, Any] = {}
+    if args.observe_base_lin_vel is not None:
+        options["observe_base_lin_vel"] = args.observe_base_lin_vel
+    if args.fine_tracking_weight is not None:
+        options["rewards"] = {"tracking_lin_vel_fine": args.fine_tracking_weight}
+    return options or None
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     """Train the Go1 velocity tracker with PPO (RSL-RL) on Ray workers or serially.
 
@@ -281,11 +291,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         driver_worker=args.driver_worker,
         eval_episodes=args.eval_episodes,
         env_errors=args.env_errors,
-        task_kwargs=(
-            None
-            if args.observe_base_lin_vel is None
-            else {"observe_base_lin_vel": args.observe_base_lin_vel}
-        ),
+        task_kwargs=train_task_options(args),
     )
     row = result.last_row
     print(

@@ -256,6 +256,15 @@ def add_train(sub: Any) -> None:
         "legged_gym's and Isaac Lab's (--no-observe-base-lin-vel: the paper's 45) "
         "(default: on, or what the --resume checkpoint was trained with)",
     )
+    tr.add_argument(
+        "--fine-tracking-weight",
+        type=float,
+        default=None,
+        action=AtLeast,
+        least=0,
+        help="reward weight of the narrow linear-velocity tracking kernel, exp(-error^2/0.05), "
+        "beside the paper's exp(-error^2/0.25); 0 trains on the paper's reward (default: 1.0)",
+    )
     add_int(tr, "--seed", 0, "seed of the envs and the learner", least=0)
     add_int(tr, "--torch-threads", 1, "torch CPU threads (learner)")
     tr.add_argument(
