@@ -140,6 +140,8 @@ def test_tracking_sigma_sets_the_width_of_both_kernels():
 
 def test_fine_tracking_kernel_is_off_by_default_and_narrower_when_on():
     assert RewardWeights().tracking_lin_vel_fine == 0.0
+    # last in the term vector, so that rewards with it off are bit for bit those from before it
+    assert list(RewardWeights().__dataclass_fields__)[-1] == "tracking_lin_vel_fine"
     assert "tracking_lin_vel_fine" not in _terms(_env().task)
     rewards = RewardWeights(tracking_lin_vel_fine=2.0)
     for sigma in (0.05, 0.02):

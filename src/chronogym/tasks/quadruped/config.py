@@ -126,7 +126,6 @@ class RewardWeights:
 
     tracking_lin_vel: float = 1.0  # exp(-|v_xy - cmd_xy|^2 / sigma)
     tracking_ang_vel: float = 0.5  # exp(-(w_z - cmd_wz)^2 / sigma)
-    tracking_lin_vel_fine: float = 0.0  # exp(-|v_xy - cmd_xy|^2 / fine_tracking_sigma)
     lin_vel_z: float = -1.0  # v_z^2
     ang_vel_xy: float = -0.02  # w_x^2 + w_y^2 (roll and pitch rate)
     orientation: float = -1.0  # |projected gravity_xy|^2
@@ -136,6 +135,9 @@ class RewardWeights:
     torques: float = -1e-4  # |tau|^2
     feet_air_time: float = 1.0  # sum over touchdowns of (air time - threshold), if moving
     feet_slip: float = 0.0  # sum over feet on the ground of their horizontal speed^2
+    # last, so that the term vector's sum, and every reward, stays bit for bit what it was
+    # before this term existed whenever it is off
+    tracking_lin_vel_fine: float = 0.0  # exp(-|v_xy - cmd_xy|^2 / fine_tracking_sigma)
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):

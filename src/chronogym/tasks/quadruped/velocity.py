@@ -133,6 +133,13 @@ class BaseMotion(NamedTuple):
     command: list[float]  # (vx, vy, yaw rate) commanded
 
 
+def _planar_error2(motion: BaseMotion) -> float:
+    """|v_xy - cmd_xy|^2, the squared planar velocity-tracking error."""
+    vx, vy, _ = motion.lin_vel
+    cmd_x, cmd_y, _ = motion.command
+    return (vx - cmd_x) ** 2 + (vy - cmd_y) ** 2
+
+
 #: One reward term of a task: its unweighted value for the motion of the step.
 RewardTerm = Callable[[BaseMotion], float]
 
@@ -449,7 +456,6 @@ class Go1VelocityBase(Task, ABC):
         return {
             "tracking_lin_vel": self._reward_tracking_lin_vel,
             "tracking_ang_vel": self._reward_tracking_ang_vel,
-            "tracking_lin_vel_fine": self._reward_tracking_lin_vel_fine,
             "lin_vel_z": self._reward_lin_vel_z,
             "ang_vel_xy": self._reward_ang_vel_xy,
             "orientation": self._reward_orientation,
@@ -459,15 +465,14 @@ class Go1VelocityBase(Task, ABC):
             "torques": self._reward_torques,
             "feet_air_time": self._reward_feet_air_time,
             "feet_slip": self._reward_feet_slip,
+            "tracking_lin_vel_fine": self._reward_tracking_lin_vel_fine,
         }
 
     # --- reward terms: one per RewardWeights field, unweighted, without side effects --------
 
     def _reward_tracking_lin_vel(self, motion: BaseMotion) -> float:
         """exp(-|v_xy - cmd_xy|^2 / sigma)."""
-        vx, vy, _ = motion.lin_vel
-        cmd_x, cmd_y, _ = motion.command
-        return math.exp(-((vx - cmd_x) ** 2 + (vy - cmd_y) ** 2) / self.config.tracking_sigma)
+        return math.exp(-_planar_error2(motion) / self.config.tracking_sigma)
 
     def _reward_tracking_ang_vel(self, motion: BaseMotion) -> float:
         """exp(-(w_z - cmd_wz)^2 / sigma)."""
@@ -476,10 +481,7 @@ class Go1VelocityBase(Task, ABC):
 
     def _reward_tracking_lin_vel_fine(self, motion: BaseMotion) -> float:
         """exp(-|v_xy - cmd_xy|^2 / fine_tracking_sigma)."""
-        vx, vy, _ = motion.lin_vel
-        cmd_x, cmd_y, _ = motion.command
-        error2 = (vx - cmd_x) ** 2 + (vy - cmd_y) ** 2
-        return math.exp(-error2 / self.config.fine_tracking_sigma)
+        return math.exp(-_planar_error2(motion) / self.config.fine_tracking_sigma)
 
     def _reward_lin_vel_z(self, motion: BaseMotion) -> float:
         """v_z^2."""
