@@ -100,6 +100,16 @@ def vector_rollout(vec, steps: int, seed: int = 11, kill=None) -> list:
     return out
 
 
+def synthetic_rollout(vec, steps: int) -> list:
+    """A ``chronogym/Synthetic-v0`` vector env: seeded random actions (2 floats); the reset's
+    and every step's results."""
+    rng = np.random.default_rng(5)
+    out = [vec.reset(seed=3)]
+    for _ in range(steps):
+        out.append(vec.step(rng.uniform(-1, 1, (vec.num_envs, 2)).astype(np.float32)))
+    return out
+
+
 def single_env_rollouts(make_env, num_envs: int, steps: int, seed: int = 11) -> list:
     """What a plain loop over SimEnvs gives: per env, (obs, reward, term, trunc) per step.
 

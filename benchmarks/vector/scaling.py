@@ -33,7 +33,12 @@ Paths, side by side (the same W, envs per worker and step cost, one after anothe
   envs per worker: skipped at envs_per_worker > 1);
 - ``multinode`` (``--multinode``): ``RayVectorEnv(scheduling="spread")`` on a loopback
   ``chronogym.testing.LocalCluster`` whose head has no CPUs, so every worker is on another
-  node than the driver (actor calls), after the local paths (it needs its own Ray).
+  node than the driver, after the local paths (it needs its own Ray): each node's relay
+  steps its workers through a shared block there, one Ray call per node and step
+  (:mod:`chronogym.vector.spread_step`);
+- ``multinode_messages``: the same with ``shared_memory=False``: the relay sends each
+  worker its message and returns every answer, which the driver decodes one by one (the
+  default before the per-node shared step). ``--multinode-only`` runs just these two.
 
 Method. One local Ray for the local paths (``ray.init(num_cpus=--ray-cpus)``, default the
 machine's CPUs; RayVectorEnv shares them as fractional ``num_cpus`` per worker, so 64
@@ -55,7 +60,9 @@ workers' compute, never the driver's serial work per worker), and ("cores") from
 measured at W = 1 plus the driver's CPU per further worker, ``t(W) = t(1) + b_cpu (W - 1)``:
 what a machine with a core per worker shows when nothing but the driver's serial work grows
 with W (the issue's "measure b as the driver process's CPU time"; the wall time's b on 2
-cores also holds the workers' own wake-ups queueing for the 2 cores).
+cores also holds the workers' own wake-ups queueing for the 2 cores). The multi-node paths
+make one Ray call per node in use, so W = 1 ... ``--nodes`` also add calls: their fits add
+``b_cpu`` over W >= ``--nodes`` and its "cores" predictions (:func:`fits`).
 
 Stragglers (W = ``--straggler-workers``, 10 ms, lognormal CV 0, 0.25, 0.5, socket path):
 the barrier's env-steps/s; ``recv(min_envs=num_envs // 2)`` with every env kept in flight
@@ -112,7 +119,8 @@ from chronogym.sizing import StepModel, fit_line, fit_overhead, synthetic_step_s
 DEFAULT_OUT = RESULTS / "scaling.json"
 ENV_ID = "chronogym/Synthetic-v0"
 LOCAL_PATHS = ("socket", "socket_tree", "socket_messages", "actor", "driver_worker", "async")
-ALL_PATHS = (*LOCAL_PATHS, "multinode")
+MULTINODE_PATHS = ("multinode", "multinode_messages")
+ALL_PATHS = (*LOCAL_PATHS, *MULTINODE_PATHS)
 PREDICT_AT = (64, 256)
 STRAGGLER_CVS = (0.0, 0.25, 0.5)
 STRAGGLER_STEP_MS = 10.0
@@ -130,7 +138,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--step-ms", type=positive_float, nargs="+", default=[0.1, 1.0, 10.0])
     parser.add_argument("--paths", nargs="+", choices=LOCAL_PATHS, default=list(LOCAL_PATHS))
     parser.add_argument(
-        "--multinode", action="store_true", help="add the loopback multi-node path (slow start)"
+        "--multinode", action="store_true", help="add the loopback multi-node paths (slow start)"
+    )
+    parser.add_argument(
+        "--multinode-only", action="store_true", help="only the multi-node paths (no stragglers)"
     )
     parser.add_argument("--nodes", type=positive_int, default=2, help="worker nodes of it")
     parser.add_argument("--seconds", type=positive_float, default=2.0, help="timed per setting")
@@ -163,6 +174,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         args.workers, args.envs_per_worker, args.step_ms = [1, 2, 8], [1, 2], [1.0]
         args.seconds, args.min_steps, args.warmup = 0.3, 5, 3
         args.straggler_workers = 4
+    if args.multinode_only:
+        args.multinode, args.paths, args.no_stragglers = True, [], True
     if args.with_128 and 128 not in args.workers:
         args.workers.append(128)
     args.workers = sorted(set(args.workers))
@@ -217,8 +230,10 @@ def build(path: str, workers: int, epw: int, kwargs: dict[str, Any], address: st
         options["shared_memory"] = False
     elif path == "driver_worker":
         options["driver_worker"] = True
-    elif path == "multinode":
+    elif path in MULTINODE_PATHS:
         options.update(address=address, scheduling="spread")
+        if path == "multinode_messages":
+            options["shared_memory"] = False
     vec = RayVectorEnv(ENV_ID, num_envs, **options)
     if path == "socket_tree":
         vec._backend.wake_tree = True  # groups of FANOUT, whatever the cores (first step)
@@ -529,9 +544,12 @@ def predicted_on_cores(t1_ms: float, b_cpu_us: float, workers: int) -> float:
     return t1_ms / (t1_ms + b_cpu_us / 1e3 * (workers - 1))
 
 
-def fits(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def fits(runs: list[dict[str, Any]], nodes: int = 1) -> list[dict[str, Any]]:
     """Per path and envs per worker: the fit at each step cost (with its predictions) and
-    pooled over the step costs."""
+    pooled over the step costs. A multi-node path's driver makes one call per node in use,
+    so W = 1 ... ``nodes`` also add nodes: its entries add the driver-CPU fit over W >=
+    ``nodes`` (every node in use), ``b_cpu_us_every_node``, and the "cores" predictions
+    from it, ``t(W) = t(nodes) + b_cpu (W - nodes)`` against ``t(1)``."""
     out = []
     groups = sorted({(r["path"], r["envs_per_worker"]) for r in runs})
     for path, epw in groups:
@@ -553,7 +571,25 @@ def fits(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     entry[f"predicted_rel_e_{w}_driver_bound"] = predicted(
                         fit, step_ms, epw, w, True
                     )
+                if path in MULTINODE_PATHS and nodes > 1:
+                    entry.update(every_node_fit(chosen, epw, nodes, one[0] if one else None))
             out.append(entry)
+    return out
+
+
+def every_node_fit(
+    rows: list[dict[str, Any]], epw: int, nodes: int, t1_ms: float | None
+) -> dict[str, Any]:
+    """The driver-CPU slope over W >= ``nodes`` and its "cores" predictions (see :func:`fits`)."""
+    full = [r for r in rows if r["workers"] >= nodes]
+    fit = fit_group(full, epw)
+    at_nodes = [r["wall_ms_per_step"] for r in full if r["workers"] == nodes]
+    if fit is None or t1_ms is None or not at_nodes:
+        return {}
+    out: dict[str, Any] = {"b_cpu_us_every_node": fit["b_cpu_us"]}
+    for w in PREDICT_AT:
+        t_w = at_nodes[0] + fit["b_cpu_us"] / 1e3 * (w - nodes)
+        out[f"predicted_rel_e_{w}_cores_every_node"] = t1_ms / t_w
     return out
 
 
@@ -745,15 +781,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"multinode: {args.nodes} worker nodes of {args.ray_cpus} CPUs, head without")
         try:
             with multinode_cluster(args.nodes, args.ray_cpus) as address:
-                prime(["multinode"], args, address)
-                sweep(["multinode"], args, address, runs, starts, failures)
+                prime(list(MULTINODE_PATHS), args, address)
+                sweep(list(MULTINODE_PATHS), args, address, runs, starts, failures)
         except Exception as error:
             failures.append({"setting": "multinode cluster", "error": error_text(error)})
             print(f"  multinode failed: {error_text(error)}")
     add_relative_efficiency(runs)
     record.update(
         runs=runs,
-        fits=fits(runs),
+        fits=fits(runs, args.nodes if args.multinode else 1),
         startup=starts,
         memory=memory_fits(starts),
         stragglers=straggler_rows,
@@ -768,6 +804,15 @@ def main(argv: list[str] | None = None) -> int:
     print("cores: t(W) = t(1) + b_cpu (W - 1), a core per worker (only the driver's CPU adds)")
     print("(step ms '-': fitted over every step cost)")
     print(table(FIT_COLUMNS, with_none(FIT_COLUMNS, record["fits"]), rule=True))
+    for entry in record["fits"]:
+        if "b_cpu_us_every_node" in entry:
+            print(
+                f"  {entry['path']}, epw {entry['envs_per_worker']}, {entry['step_ms']:g} ms, "
+                f"W >= {args.nodes} (every node in use): b_cpu "
+                f"{entry['b_cpu_us_every_node']:.1f} us; cores: E64/E1 "
+                f"{entry['predicted_rel_e_64_cores_every_node']:.2f}, E256/E1 "
+                f"{entry['predicted_rel_e_256_cores_every_node']:.2f}"
+            )
     print()
     print("start-up (constructor to first reset) and memory")
     print(table(START_COLUMNS, with_none(START_COLUMNS, starts), rule=True))

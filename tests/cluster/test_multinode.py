@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from vector_rollouts import synthetic_rollout
 
 from chronogym.testing import LocalCluster, ray_start_available
 
@@ -17,6 +18,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 GO1 = "chronogym/Go1Velocity-v0"
+SYNTHETIC = "chronogym/Synthetic-v0"
 TIMING_COLUMNS = ("wall_time", "collect_s", "learn_s", "eval_s")
 
 
@@ -52,6 +54,12 @@ def go1_rollout(vec, steps: int, seed: int = 5) -> list[np.ndarray]:
     return arrays
 
 
+def spread_steps(vec) -> int:
+    """Barrier steps made through every node's shared block (spread_step.py) so far."""
+    spread = vec._backend._spread
+    return 0 if spread is None else spread.steps
+
+
 def test_cluster_has_three_live_nodes(cluster):
     import ray
 
@@ -83,6 +91,7 @@ def test_spread_workers_on_distinct_nodes_match_serial(cluster):
         assert vec._backend.connected() == [node == "node_0" for node in nodes]
         assert vec._backend.relayed() == [node != "node_0" for node in nodes]
         distributed = go1_rollout(vec, steps=60)
+        assert spread_steps(vec) == 60  # every node's block; one Ray call per other node
     finally:
         vec.close()
     assert None not in nodes, f"worker pids not found under any node: {nodes}"
@@ -131,8 +140,10 @@ def test_relayed_workers_survive_a_kill_and_a_lost_relay(cluster):
         _, _, _, truncated, info = vec.step(actions)
         assert truncated.tolist() == [w == victim for w in range(3)]
         assert "ActorDiedError" in info["worker_error"][victim]
-        vec.step(actions)  # the replacement steps (through a relay or a socket of this node)
+        before = spread_steps(vec)
+        _, _, _, truncated, _ = vec.step(actions)  # the replacement steps, in a new spread step
         assert vec._backend.relayed()[victim] or vec._backend.connected()[victim]
+        assert spread_steps(vec) == 1 and before > 1 and not truncated.any()
 
         node = next(iter(relays.node_of.values()))  # a relay that still serves a worker
         relay = relays.by_node[node]
@@ -146,8 +157,9 @@ def test_relayed_workers_survive_a_kill_and_a_lost_relay(cluster):
         assert all(truncated[w] for w in served)
         assert f"the relay of node {node} failed" in info["worker_error"][served[0]]
         vec.step(actions)
-        vec.step(actions)  # its workers were replaced, with a new relay where needed
+        _, _, _, truncated, _ = vec.step(actions)  # replaced, with a new relay where needed
         assert all(vec._backend.relayed()[w] or vec._backend.connected()[w] for w in range(3))
+        assert spread_steps(vec) == 2 and not truncated.any()
     finally:
         vec.close()
     assert vec._backend._relays is None  # closed: the relays are gone too
@@ -180,6 +192,70 @@ def test_a_relayed_worker_silent_past_step_timeout_is_replaced(cluster):
         vec.step(np.zeros((3, 2), dtype=np.float32))  # the replacement answers
     finally:
         vec.close()
+
+
+@pytest.mark.parametrize("info_floats", [0, 3, 20_000])  # none; a relay's tail slot; its socket
+def test_spread_step_carries_infos_and_resets_like_serial(cluster, info_floats):
+    """Workers on every node (spread), episodes of 7 steps; infos travel whole from a
+    relay, in its block's tail slot or, too long for it (80 kB), over the worker's socket.
+    With the shared step off, the relays' per-worker messages give the same numbers."""
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+    from chronogym.vector.serial import SerialVectorEnv
+
+    kwargs = {"step_ms": 0.0, "info_floats": info_floats, "max_steps": 7}
+    options = {"envs_per_worker": 2, "env_kwargs": kwargs}
+    serial = synthetic_rollout(SerialVectorEnv(SYNTHETIC, 6, **options), 20)
+    spread = {"address": cluster.address, "scheduling": "spread", "num_cpus": 0.5, **options}
+    on = RayVectorEnv(SYNTHETIC, 6, **spread)
+    off = RayVectorEnv(SYNTHETIC, 6, shared_memory=False, **spread)
+    try:
+        for vec in (on, off):
+            assert any(vec._backend.relayed()), "spread placement left every worker here"
+            got = synthetic_rollout(vec, 20)
+            for mine, theirs in zip(got, serial, strict=True):
+                arrays = 4 if len(mine) == 5 else 1  # a step's four arrays; a reset's obs
+                for a, b in zip(mine[:arrays], theirs[:arrays], strict=True):
+                    np.testing.assert_array_equal(a, b)
+                if info_floats:
+                    np.testing.assert_array_equal(mine[-1]["payload"], theirs[-1]["payload"])
+        assert spread_steps(on) == 20 and spread_steps(off) == 0
+    finally:
+        on.close()
+        off.close()
+
+
+def test_a_spread_step_that_cannot_open_falls_back_to_messages(cluster, monkeypatch):
+    """When a node's block cannot be opened, shared memory turns off (with a warning) and the
+    relays' messages carry every step, with the same numbers."""
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+    from chronogym.vector.serial import SerialVectorEnv
+    from chronogym.vector.spread_step import SpreadStep
+
+    monkeypatch.setattr(SpreadStep, "open", classmethod(lambda cls, *args: None))
+    options = {"envs_per_worker": 1, "env_kwargs": {"step_ms": 0.0, "max_steps": 5}}
+    serial = synthetic_rollout(SerialVectorEnv(SYNTHETIC, 3, **options), 12)
+    vec = RayVectorEnv(
+        SYNTHETIC, 3, address=cluster.address, scheduling="spread", num_cpus=0.5, **options
+    )
+    try:
+        got = synthetic_rollout(vec, 12)
+        assert not vec._backend.shared_memory and spread_steps(vec) == 0
+        assert any(vec._backend.relayed())
+    finally:
+        vec.close()
+    for mine, theirs in zip(got[1:], serial[1:], strict=True):
+        for a, b in zip(mine[:4], theirs[:4], strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_workers_group_by_node_with_their_rows():
+    from chronogym.vector.spread_step import HERE, by_node
+
+    groups = by_node([(0, 2), (2, 3), (3, 5), (5, 6)], {1: "b", 2: "a", 3: "b"})
+    assert [g.node for g in groups] == [HERE, "b", "a"]
+    assert [g.workers for g in groups] == [[0], [1, 3], [2]]
+    assert [g.slices for g in groups] == [[(0, 2)], [(0, 1), (1, 2)], [(0, 2)]]
+    assert [g.rows.tolist() for g in groups] == [[0, 1], [2, 5], [3, 4]]
 
 
 def test_bad_scheduling_is_rejected_by_name(cluster):

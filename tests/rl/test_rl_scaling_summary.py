@@ -5,13 +5,8 @@ from __future__ import annotations
 
 import csv
 import math
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
-
-from benchmarks.rl.rl_scaling import compare_to_first, reward_milestones, same_curve  # noqa: E402
+from benchmarks.rl.rl_scaling import compare_to_first, reward_milestones, same_curve
 
 
 def rows(rewards: list[float], seconds_per_row: float, steps_per_row: int = 100) -> list[dict]:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vector_rollouts import ENV_ID, assert_same_rollouts, vector_rollout
+from vector_rollouts import ENV_ID, assert_same_rollouts, synthetic_rollout, vector_rollout
 
 from chronogym import BoolArgumentError, RayVectorEnv, SerialVectorEnv
 from chronogym.testing.synthetic import ENV_ID as SYNTHETIC_ID
@@ -23,15 +23,6 @@ from chronogym.vector.shared_step import (
     wake_plan,
     wants_tree,
 )
-
-
-def synthetic_rollout(vec, steps: int) -> list:
-    """Seeded random actions; every step's five results."""
-    rng = np.random.default_rng(5)
-    out = [vec.reset(seed=3)]
-    for _ in range(steps):
-        out.append(vec.step(rng.uniform(-1, 1, (vec.num_envs, 2)).astype(np.float32)))
-    return out
 
 
 def cpu_seconds(pid: int) -> float:

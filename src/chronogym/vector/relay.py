@@ -12,6 +12,12 @@ answers and returns them as raw bytes, which the driver decodes as if it had rea
 a socket (:func:`~chronogym.vector.wire_format.decode_answer`). The driver's work per step
 is then one call per node plus a decode per worker.
 
+The barrier step goes further (:mod:`chronogym.vector.spread_step`): a relay holds a
+shared-memory step for its node's workers (:meth:`NodeRelay.open_shared`, the driver's own
+block of :mod:`chronogym.vector.shared_step`, opened on this node), and
+:meth:`NodeRelay.shared_step` returns the rows of all of them as four arrays, plus the
+answers of the few workers with more to say: nothing per worker on the driver's side.
+
 Security: the driver and a relay talk through Ray's own (authenticated) channel; a relay and
 its workers through Unix sockets in a private folder of their node. No TCP listener is
 opened.
@@ -29,15 +35,23 @@ import os
 import shutil
 import socket
 import tempfile
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
+from chronogym.vector.shared_step import SharedLayout, SharedStep, usable_cpus, wants_tree
 from chronogym.vector.wire_format import ANSWER, REQUEST, fill
 
 #: What a relay returns per worker: (worker, ANSWERED, the answer's bytes), or (worker, LOST
 #: or SILENT, why): its socket failed, or it did not answer within ``step_timeout``.
 RelayAnswer = tuple[int, str, Any]
 ANSWERED, LOST, SILENT = "answered", "lost", "silent"
+#: What a relay's shared step returns: its workers' obs rows (uint8), rewards, terminations
+#: and truncations, in the order of its block, and the RelayAnswers of the workers with more
+#: to say (infos, restarts, an env's error, a loss).
+SharedRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[RelayAnswer]]
 
 
 class NodeRelay:
@@ -52,6 +66,8 @@ class NodeRelay:
         self.socks: dict[int, socket.socket] = {}
         self.bufs: dict[int, bytearray] = {}
         self.opened = 0
+        self.shared: SharedStep | None = None  # the shared-memory step of some workers here
+        self.shared_workers: list[int] = []  # its workers, in the order of its block
 
     def node_id(self) -> str:
         import ray
@@ -112,6 +128,58 @@ class NodeRelay:
                 answers.append(self._failed(worker, error))
         return answers
 
+    def open_shared(
+        self,
+        workers: list[int],
+        slices: list[tuple[int, int]],
+        action_row: int,
+        obs_row: int,
+        tree: bool | None,
+    ) -> bool:
+        """Attach ``workers`` (env rows ``slices`` of a new block, in this order) to one
+        shared-memory barrier step on this node; False if one could not attach (its socket
+        is then closed, so its next step reports it lost)."""
+        self.close_shared()
+        if tree is None:
+            tree = wants_tree(len(workers), usable_cpus())
+        try:
+            layout = SharedLayout(tuple(slices), action_row, obs_row)
+            shared = SharedStep(layout, self.dir, self.spin_us * 1e-6, tree)
+        except OSError:
+            return False
+        self.shared, self.shared_workers = shared, list(workers)
+        for i, worker in enumerate(workers):
+            sock = self.socks.get(worker)
+            if sock is None or not shared.attach(i, sock, self.accept_timeout):
+                self.disconnect(worker)
+                self.close_shared()
+                return False
+            sock.settimeout(self.step_timeout)
+        return True
+
+    def shared_step(self, actions: np.ndarray) -> SharedRows:
+        """One barrier step of the attached workers (``actions``: their rows, in block order)."""
+        shared, workers = self.shared, self.shared_workers
+        if shared is None:
+            raise RuntimeError("this relay holds no shared step: open_shared() first")
+        deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
+        answers = shared.step(
+            actions,
+            [self.socks.get(worker) for worker in workers],
+            deadline,
+            lost=lambda i, error: self._failed(workers[i], error),
+            read=lambda i, _deadline: (workers[i], ANSWERED, self._read(workers[i])),
+            decode=lambda i, view: (workers[i], ANSWERED, bytes(view)),
+        )
+        rows = (answers.obs, answers.rewards, answers.terminations, answers.truncations)
+        return (*rows, list(answers.extras.values()))
+
+    def close_shared(self) -> None:
+        """Close the shared step (its workers go back to steps over their sockets)."""
+        if self.shared is not None:
+            self.shared.close()
+        self.shared, self.shared_workers = None, []
+
     def _read(self, worker: int) -> bytes:
         sock, view = self.socks[worker], memoryview(self.bufs[worker])
         got = fill(sock, view, 0, ANSWER.size)
@@ -134,6 +202,7 @@ class NodeRelay:
         return worker, LOST, why
 
     def shutdown(self) -> None:
+        self.close_shared()
         for worker in list(self.socks):
             self.disconnect(worker)
         shutil.rmtree(self.dir, ignore_errors=True)

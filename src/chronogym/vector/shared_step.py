@@ -191,7 +191,8 @@ class SharedAnswers:
     rewards: np.ndarray
     terminations: np.ndarray
     truncations: np.ndarray
-    extras: dict[int, Outcome]  # worker -> its full answer (infos, restarts, error, loss)
+    extras: dict[int, Any]  # worker -> its full answer (infos, restarts, error, loss): an
+    # Outcome on the driver, a RelayAnswer in a relay
 
     def outcome(self, w: int, lo: int, hi: int) -> Outcome:
         """Worker ``w``'s answer as the socket path gives it (rows ``lo:hi``)."""
@@ -279,9 +280,12 @@ class SharedStep:
         deadline: float | None,
         lost: Any,
         read: Any,
+        decode: Any = None,
     ) -> SharedAnswers:
         """One barrier step of every worker. ``lost(w, error)`` gives a lost worker's Outcome;
-        ``read(w, deadline)`` reads an answer sent on worker ``w``'s socket."""
+        ``read(w, deadline)`` reads an answer sent on worker ``w``'s socket; ``decode(w,
+        view)`` an answer found in worker ``w``'s tail slot (default: its Outcome; a relay
+        keeps the raw bytes)."""
         v = self.views
         g = self.gen = self.gen + 1
         v.actions[:] = np.frombuffer(actions, np.uint8)
@@ -301,6 +305,9 @@ class SharedStep:
             if status == IN_TAIL:
                 at = w * self.layout.tail_bytes
                 view = memoryview(v.tails[at : at + size].tobytes())
+                if decode is not None:
+                    extras[w] = decode(w, view)
+                    continue
                 head, *sizes = ANSWER.unpack_from(view)
                 extras[w] = decode_answer(head, sizes, view)
             else:

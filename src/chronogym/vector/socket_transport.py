@@ -9,7 +9,10 @@ step of Box spaces -- the barrier ``step`` and ``send`` / ``recv`` -- then
 writes one message per worker (its action bytes) and reads the answer from
 the socket. A worker on another node steps through its node's relay
 (:mod:`chronogym.vector.relay`): one Ray call per node carries the steps of all its
-workers, which the relay serves over Unix sockets on that node. Everything else
+workers, which the relay serves over Unix sockets on that node. The barrier step goes
+through shared memory: on the driver's node one block for every worker
+(:mod:`chronogym.vector.shared_step`), and, with workers on other nodes, a block per node,
+each other node's held by its relay (:mod:`chronogym.vector.spread_step`). Everything else
 (reset, call, non-Box spaces) uses plain actor calls.
 
 Waiting: a blocked read costs a wake-up, ~40 us per direction on a virtual
@@ -64,6 +67,7 @@ from chronogym.vector.shared_step import (
     usable_cpus,
     wants_tree,
 )
+from chronogym.vector.spread_step import SpreadHandlers, SpreadStep, by_node
 from chronogym.vector.wire_format import (
     ANSWER,
     REQUEST,
@@ -294,7 +298,8 @@ class SocketBackend(ActorBackend):
         #: Wake the workers in groups (None: when there are enough and each has a core,
         #: :func:`~chronogym.vector.shared_step.wants_tree`); read at the first step.
         self.wake_tree: bool | None = None
-        self._shared: SharedStep | None = None
+        self._shared: SharedStep | None = None  # every worker on this node: one block
+        self._spread: SpreadStep | None = None  # some on other nodes: a block per node
         self._dir: str | None = None
         self._socks: list[socket.socket | None] = []
         self._pollers: list[select.poll | None] = []
@@ -383,6 +388,8 @@ class SocketBackend(ActorBackend):
     def _disconnect(self, w: int) -> None:
         if self._shared is not None:
             self._shared.attached.discard(w)
+        if self._spread is not None:
+            self._spread.stale = True
         if self._relays is not None:
             self._relays.forget(w)
         sock, self._socks[w], self._pollers[w] = self._socks[w], None, None
@@ -394,13 +401,18 @@ class SocketBackend(ActorBackend):
         self._disconnect(worker)
         super().replace(worker, kwargs)
         self._connect([worker])
-        if self._shared is not None and not self._attach(worker):
+        if self._shared is None:
+            return
+        if self._socks[worker] is None:  # it landed on another node: a spread step next
+            self._close_shared()
+        elif not self._attach(worker):
             self._close_shared(f"its replacement worker {worker} could not attach")
 
     def shutdown(self) -> None:
         for w in range(len(self._socks)):
             self._disconnect(w)
         self._close_shared()
+        self._close_spread()
         if self._relays is not None:
             self._relays.shutdown()
             self._relays = None
@@ -416,6 +428,10 @@ class SocketBackend(ActorBackend):
         """A barrier step of every worker through shared memory
         (:mod:`chronogym.vector.shared_step`), for a caller whose :meth:`shares_steps` said
         yes; None when the block cannot be opened (then: one socket message per worker)."""
+        if None in self._socks:  # workers on other nodes: a block per node
+            return self._spread_step(actions, slices, obs_row)
+        if self._spread is not None:  # every worker is on this node again
+            self._close_spread()
         if self._shared is None and not self._open_shared(actions, slices, obs_row):
             return None
         assert self._shared is not None
@@ -424,8 +440,56 @@ class SocketBackend(ActorBackend):
 
     def shares_steps(self) -> bool:
         """Can the barrier step go through shared memory (on, and every worker connected
-        here)? Cheap: asked before each step's actions are prepared for it."""
-        return self.shared_memory and None not in self._socks
+        here or to its node's relay)? Cheap: asked before each step's actions are prepared."""
+        if not self.shared_memory:
+            return False
+        if None not in self._socks or (self._spread is not None and not self._spread.stale):
+            return True
+        relayed = self._relays.node_of if self._relays is not None else {}
+        return all(s is not None or w in relayed for w, s in enumerate(self._socks))
+
+    def _spread_step(
+        self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
+    ) -> SharedAnswers | None:
+        """The barrier step through every node's block (:mod:`chronogym.vector.spread_step`)."""
+        assert self._relays is not None
+        if self._spread is not None and self._spread.stale:
+            self._close_spread()
+        if self._spread is None:
+            self._spread = self._open_spread(actions, slices, obs_row)
+            if self._spread is None:
+                return None
+        deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
+        relay_timeout = None if self.step_timeout is None else self.step_timeout + RELAY_MARGIN_S
+        handlers = SpreadHandlers(self._lost, self._read, self._relayed_outcome, relay_timeout)
+        return self._spread.step(actions, self._socks, deadline, self._relays, handlers)
+
+    def _open_spread(
+        self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
+    ) -> SpreadStep | None:
+        """Attach every worker to its node's block; None (and off for good) if one fails."""
+        assert self._relays is not None
+        groups = by_node(slices, self._relays.node_of)
+        options = {
+            "directory": self._dir,
+            "spin_s": self.spin_us * 1e-6,
+            "tree": self.wake_tree,
+            "timeout": self.start_timeout,
+            "step_timeout": self.step_timeout,
+        }
+        action_row = actions.nbytes // slices[-1][1]
+        spread = SpreadStep.open(
+            groups, self._relays, self._socks, action_row, obs_row, options, self._disconnect
+        )
+        if spread is None:
+            self.shared_memory = False
+            logger.warning("chronogym: no shared-memory step across nodes; using messages")
+        return spread
+
+    def _close_spread(self) -> None:
+        if self._spread is not None:
+            self._spread.close(self._relays)
+            self._spread = None
 
     def _open_shared(
         self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
@@ -571,19 +635,21 @@ class SocketBackend(ActorBackend):
             assert self._relays is not None
             timeout = None if self.step_timeout is None else self.step_timeout + RELAY_MARGIN_S
             self._relays.resolve(handle.call, timeout)
-            w = handle.worker
             answers = handle.call.answers or {}
             if handle.call.failure is not None:
                 relayed: tuple[str, Any] = (LOST, handle.call.failure)
             else:
-                relayed = answers.get(w, (LOST, "no answer from the relay"))
-            kind, value = relayed
-            if kind == ANSWERED:
-                status, *sizes = ANSWER.unpack_from(value)
-                handle.outcome = decode_answer(status, sizes, memoryview(value))
-            else:
-                handle.outcome = self._lost_relayed(w, value, silent=kind == SILENT)
+                relayed = answers.get(handle.worker, (LOST, "no answer from the relay"))
+            handle.outcome = self._relayed_outcome(handle.worker, relayed)
         return handle.outcome
+
+    def _relayed_outcome(self, w: int, relayed: tuple[str, Any]) -> Outcome:
+        """Worker ``w``'s (kind, value) from its relay, as if read from its socket here."""
+        kind, value = relayed
+        if kind == ANSWERED:
+            status, *sizes = ANSWER.unpack_from(value)
+            return decode_answer(status, sizes, memoryview(value))
+        return self._lost_relayed(w, value, silent=kind == SILENT)
 
     def _lost_relayed(self, w: int, why: str, silent: bool) -> Outcome:
         """A relayed worker's step failed: the worker is lost (with Ray's reason, unless it is

@@ -1,0 +1,201 @@
+"""The shared-memory barrier step across nodes: one Ray call per node, nothing per worker.
+
+With every worker on the driver's node, a barrier step goes through one shared block
+(:mod:`chronogym.vector.shared_step`). With workers on other nodes, each of those nodes'
+relays (:mod:`chronogym.vector.relay`) holds such a block for its node's workers
+(:meth:`~chronogym.vector.relay.NodeRelay.open_shared`). A step then costs the driver:
+
+1. one Ray call per other node, carrying that node's action rows (sent first, so every
+   node steps while the driver waits);
+2. the driver's own block for the workers on its node, if it has any;
+3. one copy of each node's returned rows into the batch.
+
+The driver does nothing per worker, except for a worker with more to say (infos,
+restarts, an env's error, a loss), whose answer comes whole, as over its socket. A relay
+whose call fails (its node died) makes all of its workers lost.
+
+A :class:`SpreadStep` serves one placement of the workers. The backend marks it
+``stale`` when a worker is lost or replaced (the replacement may land on another node)
+and opens a new one at the next barrier step.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from chronogym.vector.backend import Outcome
+from chronogym.vector.relay import LOST, Relays
+from chronogym.vector.shared_step import (
+    SharedAnswers,
+    SharedLayout,
+    SharedStep,
+    usable_cpus,
+    wants_tree,
+)
+
+#: the driver's node in :class:`NodeRows` (a relay's node is its Ray node id)
+HERE = ""
+
+
+@dataclass(frozen=True)
+class NodeRows:
+    """One node's workers, in the order of its block, and the batch rows of their envs."""
+
+    node: str
+    workers: list[int]
+    slices: list[tuple[int, int]]  # each worker's rows in the node's block
+    rows: np.ndarray  # the node's block row k is batch row rows[k]
+
+
+def by_node(slices: list[tuple[int, int]], node_of: dict[int, str]) -> list[NodeRows]:
+    """Group the workers by node (:data:`HERE` for those not in ``node_of``), in worker
+    order within a node."""
+    members: dict[str, list[int]] = {}
+    for w in range(len(slices)):
+        members.setdefault(node_of.get(w, HERE), []).append(w)
+    groups = []
+    for node, workers in members.items():
+        local, at, rows = [], 0, []
+        for w in workers:
+            lo, hi = slices[w]
+            local.append((at, at + hi - lo))
+            at += hi - lo
+            rows.append(np.arange(lo, hi))
+        groups.append(NodeRows(node, workers, local, np.concatenate(rows)))
+    return groups
+
+
+@dataclass(frozen=True)
+class SpreadHandlers:
+    """The backend's answers to what a step meets: a lost worker of the driver's node, an
+    answer sent on its socket, and a relayed worker's (kind, value) as a relay reports it."""
+
+    lost: Callable[[int, BaseException], Outcome]
+    read: Callable[[int, float | None], Outcome]
+    relayed: Callable[[int, tuple[str, Any]], Outcome]
+    relay_timeout: float | None  # how long to wait for a relay's call
+
+
+class SpreadStep:
+    """The driver's end of a barrier step over the shared blocks of several nodes."""
+
+    def __init__(self, here: NodeRows | None, remote: list[NodeRows], obs_row: int) -> None:
+        self.here, self.remote, self.obs_row = here, remote, obs_row
+        self.local: SharedStep | None = None  # the driver's block, for the workers here
+        self.stale = False  # a worker was lost or replaced: open a new one
+        self.steps = 0
+
+    @classmethod
+    def open(
+        cls,
+        groups: list[NodeRows],
+        relays: Relays,
+        socks: list[socket.socket | None],
+        action_row: int,
+        obs_row: int,
+        options: dict[str, Any],
+        drop: Callable[[int], None],
+    ) -> SpreadStep | None:
+        """Attach every worker to its node's block (the driver's own for its node); None if
+        one could not (``drop(w)``: a worker of this node that could not, whose socket may
+        be midway through a message). ``options``: ``directory`` (of the driver's block),
+        ``spin_s``, ``tree`` (None: each node decides), ``timeout`` (to attach) and
+        ``step_timeout``."""
+        import ray
+
+        here = next((g for g in groups if g.node == HERE), None)
+        remote = [g for g in groups if g.node != HERE]
+        refs = [
+            relays.by_node[g.node].open_shared.remote(
+                g.workers, g.slices, action_row, obs_row, options["tree"]
+            )
+            for g in remote
+        ]
+        step = cls(here, remote, obs_row)
+        try:
+            if here is not None:
+                layout = SharedLayout(tuple(here.slices), action_row, obs_row)
+                tree = options["tree"]
+                if tree is None:
+                    tree = wants_tree(len(here.workers), usable_cpus())
+                step.local = SharedStep(layout, options["directory"], options["spin_s"], tree)
+                for i, w in enumerate(here.workers):
+                    sock = socks[w]
+                    if sock is None or not step.local.attach(i, sock, options["timeout"]):
+                        drop(w)
+                        raise OSError(f"worker {w} could not attach")
+                    sock.settimeout(options["step_timeout"])
+            if not all(ray.get(refs, timeout=options["timeout"])):
+                raise OSError("a relay's workers could not attach")
+        except Exception:
+            step.close(relays)
+            return None
+        return step
+
+    def step(
+        self,
+        actions: np.ndarray,
+        socks: list[socket.socket | None],
+        deadline: float | None,
+        relays: Relays,
+        handlers: SpreadHandlers,
+    ) -> SharedAnswers:
+        """One barrier step of every worker; the batch's rows, and the workers' extras as
+        :class:`~chronogym.vector.shared_step.SharedAnswers` holds them."""
+        import ray
+
+        n = len(actions)
+        flat = actions.reshape(n, -1)
+        refs = [
+            relays.by_node[g.node].shared_step.remote(np.ascontiguousarray(flat[g.rows]))
+            for g in self.remote
+        ]
+        self.steps += 1
+        obs = np.zeros((n, self.obs_row), np.uint8)
+        rewards = np.zeros(n, np.float64)
+        terminations, truncations = np.zeros(n, np.bool_), np.zeros(n, np.bool_)
+        extras: dict[int, Outcome] = {}
+        if self.here is not None and self.local is not None:
+            here = self.here
+            got = self.local.step(
+                np.ascontiguousarray(flat[here.rows]),
+                [socks[w] for w in here.workers],
+                deadline,
+                lambda i, error: handlers.lost(here.workers[i], error),
+                lambda i, when: handlers.read(here.workers[i], when),
+            )
+            obs[here.rows], rewards[here.rows] = got.obs, got.rewards
+            terminations[here.rows], truncations[here.rows] = got.terminations, got.truncations
+            extras.update({here.workers[i]: outcome for i, outcome in got.extras.items()})
+        for group, ref in zip(self.remote, refs, strict=True):
+            try:
+                rows = ray.get(ref, timeout=handlers.relay_timeout)
+            except Exception as error:
+                why = f"the relay of node {group.node} failed: {type(error).__name__}: {error}"
+                relays.drop_node(group.node)
+                for w in group.workers:
+                    extras[w] = handlers.relayed(w, (LOST, why))
+                continue
+            got_obs, got_rewards, got_terminations, got_truncations, more = rows
+            obs[group.rows], rewards[group.rows] = got_obs, got_rewards
+            terminations[group.rows], truncations[group.rows] = got_terminations, got_truncations
+            for w, kind, value in more:
+                extras[w] = handlers.relayed(w, (kind, value))
+        return SharedAnswers(obs, rewards, terminations, truncations, extras)
+
+    def close(self, relays: Relays | None) -> None:
+        """Close the driver's block and ask every relay to close its own."""
+        if self.local is not None:
+            self.local.close()
+            self.local = None
+        for group in self.remote if relays is not None else []:
+            actor = relays.by_node.get(group.node)  # type: ignore[union-attr]
+            if actor is not None:
+                with contextlib.suppress(Exception):
+                    actor.close_shared.remote()
