@@ -112,13 +112,15 @@ class RayVectorEnv(WorkerVectorEnv):
             on a read; an answer caught while spinning saves the wake-up of
             an idle core (~40 µs each way on a VM). Default 250; 0 never spins
             (no CPU at all while waiting).
-        shared_memory: ``transport="socket"`` only: when every worker is on
-            the driver's node, the barrier ``step`` goes through one shared
-            memory block and one wake-up for all workers
-            (:mod:`chronogym.vector.shared_step`), so the driver's CPU per
-            worker no longer holds a message each way; ``send`` / ``recv``
-            and ``profile_steps()`` still use one socket message per worker.
-            Default True; False: sockets only. Same numbers either way.
+        shared_memory: ``transport="socket"`` only: the barrier ``step`` goes
+            through one shared memory block and one wake-up for all workers
+            on a node (:mod:`chronogym.vector.shared_step`): the driver's for
+            its node, each other node's relay's for that node, one Ray call
+            per node (:mod:`chronogym.vector.spread_step`), so the driver's
+            CPU per worker no longer holds a message each way; ``send`` /
+            ``recv`` and ``profile_steps()`` still use one socket message per
+            worker. Default True; False: messages only. Same numbers either
+            way.
         driver_worker: the driver steps the last worker's envs itself, in its
             own process, while the Ray workers step theirs
             (:mod:`chronogym.vector.driver_worker`): one process and one round
