@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from chronogym.vector.shared_step import SharedLayout, SharedStep, usable_cpus, wants_tree
+from chronogym.vector.shared_step import SharedLayout, SharedStep
 from chronogym.vector.wire_format import ANSWER, REQUEST, fill
 
 #: What a relay returns per worker: (worker, ANSWERED, the answer's bytes), or (worker, LOST
@@ -140,8 +140,6 @@ class NodeRelay:
         shared-memory barrier step on this node; False if one could not attach (its socket
         is then closed, so its next step reports it lost)."""
         self.close_shared()
-        if tree is None:
-            tree = wants_tree(len(workers), usable_cpus())
         try:
             layout = SharedLayout(tuple(slices), action_row, obs_row)
             shared = SharedStep(layout, self.dir, self.spin_us * 1e-6, tree)

@@ -213,8 +213,13 @@ class SharedStep:
     """The driver's end: the block, the pipes, and the barrier step over them."""
 
     def __init__(
-        self, layout: SharedLayout, directory: str | None, spin_s: float, tree: bool = False
+        self,
+        layout: SharedLayout,
+        directory: str | None,
+        spin_s: float,
+        tree: bool | None = False,
     ) -> None:
+        """``tree``: wake the workers in groups (None: :func:`wants_tree` on this node)."""
         from chronogym.vector.socket_transport import AdaptiveSpin
 
         self.layout = layout
@@ -223,6 +228,8 @@ class SharedStep:
         self.views = SharedViews(layout, self._map)
         self._go = [os.pipe(), os.pipe()]
         self._done_r, self._done_w = os.pipe()
+        if tree is None:
+            tree = wants_tree(len(layout.slices), usable_cpus())
         self.groups = wake_plan(len(layout.slices), tree)
         self._group_of = {w: k for k, group in enumerate(self.groups) for w in group}
         tree = len(self.groups) > 1

@@ -64,8 +64,6 @@ from chronogym.vector.shared_step import (
     SharedLayout,
     SharedServer,
     SharedStep,
-    usable_cpus,
-    wants_tree,
 )
 from chronogym.vector.spread_step import SpreadHandlers, SpreadStep, by_node
 from chronogym.vector.wire_format import (
@@ -496,11 +494,8 @@ class SocketBackend(ActorBackend):
     ) -> bool:
         """Make the block and attach every worker; False (and off for good) if one fails."""
         layout = SharedLayout(tuple(slices), actions.nbytes // slices[-1][1], obs_row)
-        tree = self.wake_tree
-        if tree is None:
-            tree = wants_tree(len(slices), usable_cpus())
         try:
-            self._shared = SharedStep(layout, self._dir, self.spin_us * 1e-6, tree)
+            self._shared = SharedStep(layout, self._dir, self.spin_us * 1e-6, self.wake_tree)
         except OSError as error:
             self.shared_memory = False
             logger.warning("chronogym: no shared-memory step (%s); using sockets", error)

@@ -31,13 +31,7 @@ import numpy as np
 
 from chronogym.vector.backend import Outcome
 from chronogym.vector.relay import LOST, Relays
-from chronogym.vector.shared_step import (
-    SharedAnswers,
-    SharedLayout,
-    SharedStep,
-    usable_cpus,
-    wants_tree,
-)
+from chronogym.vector.shared_step import SharedAnswers, SharedLayout, SharedStep
 
 #: the driver's node in :class:`NodeRows` (a relay's node is its Ray node id)
 HERE = ""
@@ -121,10 +115,9 @@ class SpreadStep:
         try:
             if here is not None:
                 layout = SharedLayout(tuple(here.slices), action_row, obs_row)
-                tree = options["tree"]
-                if tree is None:
-                    tree = wants_tree(len(here.workers), usable_cpus())
-                step.local = SharedStep(layout, options["directory"], options["spin_s"], tree)
+                step.local = SharedStep(
+                    layout, options["directory"], options["spin_s"], options["tree"]
+                )
                 for i, w in enumerate(here.workers):
                     sock = socks[w]
                     if sock is None or not step.local.attach(i, sock, options["timeout"]):
