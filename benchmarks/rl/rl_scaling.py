@@ -11,6 +11,7 @@ summary and ``rl_scaling.png``.
     python -m benchmarks.rl.rl_scaling --engine chrono --resume runs/go1/best.pt --finetune
     python -m benchmarks.rl.rl_scaling --engine chrono --minutes 40 --configs ray-16 serial-16 \
         --save-interval 20 --check-walking --pychrono-commit SHA   # from scratch, time to walk
+    python -m benchmarks.rl.rl_scaling --engine chrono --merge /tmp/ray16 /tmp/serial16
 
 Configuration names are ``<backend>-<n_env>``; the serial backend steps its envs one after
 another in the training process (the paper's "no Ray" baseline, same env code).
@@ -33,12 +34,19 @@ iterations) in order, in the same engine, by the walking criteria v2 and v1 (as
 walk of every configuration, and the ratio of each to the first configuration's, go into the
 JSON, and a dotted line marks each on the figure. ``--pychrono-commit`` records the commit
 PyChrono was built from in the machine record.
+
+``--merge DIR ...`` only joins the results of invocations run apart (each its own ``--out``,
+e.g. one configuration per sitting) into one figure and JSON in ``--out``: the comparisons
+are made again against the first folder's first configuration, and each part keeps its date
+and machine record (``parts``). The parts must share engine, start, seed, checkpoint interval,
+PyChrono commit and task.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import os
 import shutil
@@ -280,11 +288,64 @@ def time_to_walk(summaries: list[dict], runs: Path, engine: str) -> None:
             summary[f"env_steps_to_walk{suffix}"] = walked[0]["env_steps"] if walked else None
         summary["checked"] = [{k: v for k, v in r.items() if k != "run"} for r in rows]
         summary["last"] = ends["last"]
+    walk_ratios(summaries)
+
+
+def walk_ratios(summaries: list[dict]) -> None:
+    """Add to each checked summary the ratio of its minutes to walk (v2, v1) to the first
+    configuration's (None: either did not walk, or was not checked)."""
     first = summaries[0]
     for summary in summaries:
         for suffix in ("_v2", "_v1"):
-            mine, base = summary[f"minutes_to_walk{suffix}"], first[f"minutes_to_walk{suffix}"]
+            mine = summary.get(f"minutes_to_walk{suffix}")
+            base = first.get(f"minutes_to_walk{suffix}")
             summary[f"time_to_walk_ratio{suffix}"] = mine / base if mine and base else None
+
+
+#: run settings every merged part must share (a figure compares backends, nothing else)
+SHARED_FIELDS = ("benchmark", "engine", "start", "seed", "save_interval", "pychrono_commit", "task")
+
+
+def merge_results(folders: list[Path], out: Path) -> dict[str, Any]:
+    """One figure from the results of invocations run apart (e.g. ``ray-16`` in one sitting,
+    ``serial-16`` in the next), configurations in the folders' order: their CSVs are copied
+    into ``out``, the milestones, same-curve check and walk ratios recomputed against the first
+    configuration; each part's date and machine record are kept in ``parts``. The fields of
+    the JSON besides the header and ``configs``."""
+    records = []
+    for folder in folders:
+        path = folder / "rl_scaling.json"
+        if not path.is_file():
+            raise ValueError(f"--merge {folder}: no rl_scaling.json there")
+        records.append((folder, json.loads(path.read_text())))
+    first = records[0][1]
+    for folder, record in records[1:]:
+        differ = [k for k in SHARED_FIELDS if record.get(k) != first.get(k)]
+        if differ:
+            raise ValueError(
+                f"--merge {folder}: {', '.join(differ)} differ from {records[0][0]}'s "
+                f"({', '.join(f'{k}={record.get(k)!r} vs {first.get(k)!r}' for k in differ)})"
+            )
+    summaries: list[dict] = []
+    for folder, record in records:
+        for summary in record["configs"]:
+            if any(s["config"] == summary["config"] for s in summaries):
+                raise ValueError(f"--merge {folder}: configuration {summary['config']} twice")
+            summaries.append(summary)
+            if folder.resolve() != out.resolve():
+                out.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(folder / summary["csv"], out / summary["csv"])
+    compare_to_first(summaries, out)
+    walk_ratios(summaries)
+    parts = [
+        {"configs": [s["config"] for s in record["configs"]], "date": record["date"],
+         "machine": record["machine"], "minutes_per_config": record["minutes_per_config"]}
+        for _, record in records
+    ]  # fmt: skip
+    minutes = sorted({part["minutes_per_config"] for part in parts})
+    fields = {k: first.get(k) for k in SHARED_FIELDS if k != "benchmark"}
+    return {"minutes_per_config": minutes[0] if len(minutes) == 1 else minutes, **fields,
+            "configs": summaries, "parts": parts}  # fmt: skip
 
 
 def main() -> None:
@@ -301,6 +362,14 @@ def main() -> None:
         help="then find each configuration's first walking checkpoint (v2, v1)",
     )
     parser.add_argument("--pychrono-commit", help="the commit PyChrono was built from (recorded)")
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        type=Path,
+        default=[],
+        metavar="DIR",
+        help="only merge these result folders (runs made apart) into --out",
+    )
     add_run_flags(parser, DEFAULT_CONFIGS, None, None)
     args = parser.parse_args()
     default_out, default_runs = ENGINE_FOLDERS[args.engine]
@@ -309,6 +378,16 @@ def main() -> None:
         default_runs = default_runs.with_name(default_runs.name + FINETUNE_SUFFIX)
     args.out = args.out or default_out
     args.runs = args.runs or default_runs
+    if args.merge:
+        try:
+            merged = merge_results(args.merge, args.out)
+        except ValueError as error:
+            parser.error(str(error))
+        summaries = merged.pop("configs")
+        cpus = merged["parts"][0]["machine"].get("cpus")
+        title = figure_title(merged["engine"], merged["start"], merged["minutes_per_config"], cpus)
+        write_results(summaries, args.out, "rl_scaling", title, **merged)
+        return
     minutes = args.minutes or (FULL_MINUTES if args.full else SHORT_MINUTES)
     check_run_flags(parser, args, minutes)
     if args.resume is not None and not args.resume.is_file():
@@ -340,15 +419,21 @@ def main() -> None:
             print(f"{s['config']}: walks by v2 after "
                   f"{fmt_minutes(s['minutes_to_walk_v2'])}, by v1 after "
                   f"{fmt_minutes(s['minutes_to_walk_v1'])}")  # fmt: skip
-    title = (
-        f"Go1 velocity tracking in {args.engine}, PPO [512, 256, 128], {start}, "
-        f"{minutes:g} min per configuration, {os.cpu_count()} CPUs"
-    )
+    title = figure_title(args.engine, start, minutes, os.cpu_count())
     write_results(
         summaries, args.out, "rl_scaling", title, minutes_per_config=minutes, seed=args.seed,
         engine=args.engine, start=start, save_interval=args.save_interval,
         pychrono_commit=args.pychrono_commit, task=quadruped_task(),
     )  # fmt: skip
+
+
+def figure_title(engine: str, start: str, minutes: Any, cpus: int | None) -> str:
+    """The figure's title: engine, policy, start, budget per configuration and CPUs."""
+    budget = f"{minutes:g}" if isinstance(minutes, float | int) else "/".join(map(str, minutes))
+    return (
+        f"Go1 velocity tracking in {engine}, PPO [512, 256, 128], {start}, "
+        f"{budget} min per configuration, {cpus} CPUs"
+    )
 
 
 def quadruped_task() -> dict[str, Any]:
