@@ -34,11 +34,14 @@ Paths, side by side (the same W, envs per worker and step cost, one after anothe
 - ``multinode`` (``--multinode``): ``RayVectorEnv(scheduling="spread")`` on a loopback
   ``chronogym.testing.LocalCluster`` whose head has no CPUs, so every worker is on another
   node than the driver, after the local paths (it needs its own Ray): each node's relay
-  steps its workers through a shared block there, one Ray call per node and step
-  (:mod:`chronogym.vector.spread_step`);
+  steps its workers through a shared block there, one frame per node and step over a TCP
+  line to the driver (:mod:`chronogym.vector.spread_step`,
+  :mod:`chronogym.vector.relay_channel`);
+- ``multinode_calls``: the same with ``relay_tcp=False``: one Ray call per node and step
+  (the default before the TCP lines);
 - ``multinode_messages``: the same with ``shared_memory=False``: the relay sends each
   worker its message and returns every answer, which the driver decodes one by one (the
-  default before the per-node shared step). ``--multinode-only`` runs just these two.
+  default before the per-node shared step). ``--multinode-only`` runs just these three.
 
 Method. One local Ray for the local paths (``ray.init(num_cpus=--ray-cpus)``, default the
 machine's CPUs; RayVectorEnv shares them as fractional ``num_cpus`` per worker, so 64
@@ -119,7 +122,7 @@ from chronogym.sizing import StepModel, fit_line, fit_overhead, synthetic_step_s
 DEFAULT_OUT = RESULTS / "scaling.json"
 ENV_ID = "chronogym/Synthetic-v0"
 LOCAL_PATHS = ("socket", "socket_tree", "socket_messages", "actor", "driver_worker", "async")
-MULTINODE_PATHS = ("multinode", "multinode_messages")
+MULTINODE_PATHS = ("multinode", "multinode_calls", "multinode_messages")
 ALL_PATHS = (*LOCAL_PATHS, *MULTINODE_PATHS)
 PREDICT_AT = (64, 256)
 STRAGGLER_CVS = (0.0, 0.25, 0.5)
@@ -232,6 +235,8 @@ def build(path: str, workers: int, epw: int, kwargs: dict[str, Any], address: st
         options["driver_worker"] = True
     elif path in MULTINODE_PATHS:
         options.update(address=address, scheduling="spread")
+        if path == "multinode_calls":
+            options["relay_tcp"] = False
         if path == "multinode_messages":
             options["shared_memory"] = False
     vec = RayVectorEnv(ENV_ID, num_envs, **options)

@@ -54,6 +54,12 @@ def go1_rollout(vec, steps: int, seed: int = 5) -> list[np.ndarray]:
     return arrays
 
 
+def tcp_lines(vec) -> int:
+    """Nodes whose relay answers the spread step over its TCP line (relay_channel.py)."""
+    spread = vec._backend._spread
+    return 0 if spread is None else len(spread.lines)
+
+
 def spread_steps(vec) -> int:
     """Barrier steps made through every node's shared block (spread_step.py) so far."""
     spread = vec._backend._spread
@@ -91,7 +97,9 @@ def test_spread_workers_on_distinct_nodes_match_serial(cluster):
         assert vec._backend.connected() == [node == "node_0" for node in nodes]
         assert vec._backend.relayed() == [node != "node_0" for node in nodes]
         distributed = go1_rollout(vec, steps=60)
-        assert spread_steps(vec) == 60  # every node's block; one Ray call per other node
+        assert spread_steps(vec) == 60  # every node's block; one frame per other node
+        remote = {node for node in nodes if node != "node_0"}
+        assert tcp_lines(vec) == len(remote)  # over TCP, no Ray call
     finally:
         vec.close()
     assert None not in nodes, f"worker pids not found under any node: {nodes}"
@@ -134,6 +142,7 @@ def test_relayed_workers_survive_a_kill_and_a_lost_relay(cluster):
         assert relayed, "spread placement left no worker on another node"
         vec.reset(seed=0)
         vec.step(actions)
+        assert tcp_lines(vec) == len(relays.by_node)  # a relay's death breaks its line
         victim = relayed[0]
         os.kill(vec.worker_pids()[victim], signal.SIGKILL)
         time.sleep(0.3)
@@ -148,10 +157,15 @@ def test_relayed_workers_survive_a_kill_and_a_lost_relay(cluster):
         node = next(iter(relays.node_of.values()))  # a relay that still serves a worker
         relay = relays.by_node[node]
         served = [w for w, n in relays.node_of.items() if n == node]
+        relay_pid = ray.get(relay.pid.remote(), timeout=10)
         ray.kill(relay)
-        with pytest.raises(ray.exceptions.RayActorError):  # wait until it is gone
+        with pytest.raises(ray.exceptions.RayActorError):  # wait until Ray knows it gone
             for _ in range(100):
                 ray.get(relay.pid.remote(), timeout=10)
+                time.sleep(0.1)
+        with pytest.raises(ProcessLookupError):  # and its process (its TCP line) is gone
+            for _ in range(100):
+                os.kill(relay_pid, 0)
                 time.sleep(0.1)
         _, _, _, truncated, info = vec.step(actions)
         assert all(truncated[w] for w in served)
@@ -198,7 +212,8 @@ def test_a_relayed_worker_silent_past_step_timeout_is_replaced(cluster):
 def test_spread_step_carries_infos_and_resets_like_serial(cluster, info_floats):
     """Workers on every node (spread), episodes of 7 steps; infos travel whole from a
     relay, in its block's tail slot or, too long for it (80 kB), over the worker's socket.
-    With the shared step off, the relays' per-worker messages give the same numbers."""
+    With the relays on Ray calls, and with the shared step off (the relays' per-worker
+    messages), the same numbers."""
     from chronogym.vector.ray_vector_env import RayVectorEnv
     from chronogym.vector.serial import SerialVectorEnv
 
@@ -206,32 +221,39 @@ def test_spread_step_carries_infos_and_resets_like_serial(cluster, info_floats):
     options = {"envs_per_worker": 2, "env_kwargs": kwargs}
     serial = synthetic_rollout(SerialVectorEnv(SYNTHETIC, 6, **options), 20)
     spread = {"address": cluster.address, "scheduling": "spread", "num_cpus": 0.5, **options}
-    on = RayVectorEnv(SYNTHETIC, 6, **spread)
-    off = RayVectorEnv(SYNTHETIC, 6, shared_memory=False, **spread)
-    try:
-        for vec in (on, off):
+    seen = {}
+    for name, extra in (("tcp", {}), ("calls", {"relay_tcp": False}),
+                        ("messages", {"shared_memory": False})):  # fmt: skip
+        vec = RayVectorEnv(SYNTHETIC, 6, **spread, **extra)  # one at a time: 3 CPUs
+        try:
             assert any(vec._backend.relayed()), "spread placement left every worker here"
             got = synthetic_rollout(vec, 20)
-            for mine, theirs in zip(got, serial, strict=True):
-                arrays = 4 if len(mine) == 5 else 1  # a step's four arrays; a reset's obs
-                for a, b in zip(mine[:arrays], theirs[:arrays], strict=True):
-                    np.testing.assert_array_equal(a, b)
-                if info_floats:
-                    np.testing.assert_array_equal(mine[-1]["payload"], theirs[-1]["payload"])
-        assert spread_steps(on) == 20 and spread_steps(off) == 0
-    finally:
-        on.close()
-        off.close()
+            seen[name] = (spread_steps(vec), tcp_lines(vec))
+        finally:
+            vec.close()
+        for mine, theirs in zip(got, serial, strict=True):
+            arrays = 4 if len(mine) == 5 else 1  # a step's four arrays; a reset's obs
+            for a, b in zip(mine[:arrays], theirs[:arrays], strict=True):
+                np.testing.assert_array_equal(a, b)
+            if info_floats:
+                np.testing.assert_array_equal(mine[-1]["payload"], theirs[-1]["payload"])
+    assert seen["tcp"][0] == seen["calls"][0] == 20 and seen["messages"][0] == 0
+    assert seen["tcp"][1] >= 1 and seen["calls"][1] == 0
 
 
-def test_a_spread_step_that_cannot_open_falls_back_to_messages(cluster, monkeypatch):
-    """When a node's block cannot be opened, shared memory turns off (with a warning) and the
-    relays' messages carry every step, with the same numbers."""
+@pytest.mark.parametrize("fails", ["block", "line"])
+def test_a_spread_step_falls_back_where_it_cannot_open(cluster, monkeypatch, fails):
+    """A node's block that cannot be opened turns shared memory off (with a warning): the
+    relays' messages carry every step. A relay's line that cannot be dialled (a firewalled
+    port) leaves its node on Ray calls. The same numbers either way."""
     from chronogym.vector.ray_vector_env import RayVectorEnv
+    from chronogym.vector.relay_channel import DriverLine
     from chronogym.vector.serial import SerialVectorEnv
     from chronogym.vector.spread_step import SpreadStep
 
-    monkeypatch.setattr(SpreadStep, "open", classmethod(lambda cls, *args: None))
+    target = SpreadStep if fails == "block" else DriverLine
+    monkeypatch.setattr(target, {"block": "open", "line": "dial"}[fails],
+                        classmethod(lambda cls, *args: None))  # fmt: skip
     options = {"envs_per_worker": 1, "env_kwargs": {"step_ms": 0.0, "max_steps": 5}}
     serial = synthetic_rollout(SerialVectorEnv(SYNTHETIC, 3, **options), 12)
     vec = RayVectorEnv(
@@ -239,8 +261,9 @@ def test_a_spread_step_that_cannot_open_falls_back_to_messages(cluster, monkeypa
     )
     try:
         got = synthetic_rollout(vec, 12)
-        assert not vec._backend.shared_memory and spread_steps(vec) == 0
         assert any(vec._backend.relayed())
+        assert vec._backend.shared_memory == (fails == "line") and tcp_lines(vec) == 0
+        assert spread_steps(vec) == (12 if fails == "line" else 0)
     finally:
         vec.close()
     for mine, theirs in zip(got[1:], serial[1:], strict=True):

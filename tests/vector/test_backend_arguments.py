@@ -78,6 +78,7 @@ RAY_ONLY_VALUES = {
     "transport": "socket",
     "spin_us": 0,
     "shared_memory": False,
+    "relay_tcp": False,
     "driver_worker": True,
 }
 

@@ -46,10 +46,12 @@ its answer; the last one wakes the driver, which copies every row out at once. A
 with infos, restarts or an error writes its whole answer (``encode_answer``) beside its
 rows, and hops 5-6 take it from there. With workers on other nodes too, ``shared_step``
 goes to ``SocketBackend._spread_step`` -> ``spread_step.py``: ``SpreadStep.step``, which
-sends each other node's relay its rows in one ``NodeRelay.shared_step`` call (``relay.py``:
-the relay runs the same ``SharedStep.step`` over a block of its own node), steps the
-driver's node's workers through the driver's block meanwhile, and copies each node's
-returned rows into the batch. ``shared_memory=False`` keeps the messages.
+sends each other node's relay its rows as one frame over that relay's TCP line
+(``relay_channel.py``: ``DriverLine.send``; ``RelayLine`` calls ``NodeRelay.shared_step``,
+which runs the same ``SharedStep.step`` over a block of its own node; with
+``relay_tcp=False``, a Ray call of it), steps the driver's node's workers through the
+driver's block meanwhile, and copies each node's returned rows (``DriverLine.receive``)
+into the batch. ``shared_memory=False`` keeps the messages.
 
 ``send`` / ``recv`` (and ``step_async`` / ``step_wait``, ``async_reset``) take the same
 hops, except that the calls wait in ``in_flight.py``: ``InFlight.submit`` /

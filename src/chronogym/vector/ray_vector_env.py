@@ -115,12 +115,22 @@ class RayVectorEnv(WorkerVectorEnv):
         shared_memory: ``transport="socket"`` only: the barrier ``step`` goes
             through one shared memory block and one wake-up for all workers
             on a node (:mod:`chronogym.vector.shared_step`): the driver's for
-            its node, each other node's relay's for that node, one Ray call
+            its node, each other node's relay's for that node, one message
             per node (:mod:`chronogym.vector.spread_step`), so the driver's
             CPU per worker no longer holds a message each way; ``send`` /
             ``recv`` and ``profile_steps()`` still use one socket message per
             worker. Default True; False: messages only. Same numbers either
             way.
+        relay_tcp: ``transport="socket"`` with workers on other nodes only:
+            each node's relay answers the shared-memory barrier ``step`` over
+            a direct TCP connection to the driver, not a Ray call per node
+            and step (:mod:`chronogym.vector.relay_channel`; a Ray call costs
+            the driver ~1.5 ms of CPU). The relay listens on an ephemeral
+            port of its node for that one connection and admits only the
+            driver, which holds a token handed over through Ray. A node that
+            cannot be reached that way (a firewall) stays on Ray calls.
+            Default True; False: Ray calls only, no port opened. Same numbers
+            either way.
         driver_worker: the driver steps the last worker's envs itself, in its
             own process, while the Ray workers step theirs
             (:mod:`chronogym.vector.driver_worker`): one process and one round
@@ -177,15 +187,18 @@ class RayVectorEnv(WorkerVectorEnv):
         transport: str | None = None,
         spin_us: float | None = None,
         shared_memory: bool = True,
+        relay_tcp: bool = True,
         driver_worker: bool = False,
     ) -> None:
         count = len(normalize_env_fns(env_fns, num_envs))
         self.transport = transport = check_transport(transport)
         options: dict[str, Any] = {}
         check_bool("shared_memory", shared_memory)
+        check_bool("relay_tcp", relay_tcp)
         if transport == "socket":
             options["spin_us"] = check_spin_us(spin_us)
             options["shared_memory"] = shared_memory
+            options["relay_tcp"] = relay_tcp
         elif spin_us is not None:
             raise ValueError(
                 f"spin_us={spin_us!r} with transport={transport!r}: spin_us applies to "

@@ -16,11 +16,14 @@ The barrier step goes further (:mod:`chronogym.vector.spread_step`): a relay hol
 shared-memory step for its node's workers (:meth:`NodeRelay.open_shared`, the driver's own
 block of :mod:`chronogym.vector.shared_step`, opened on this node), and
 :meth:`NodeRelay.shared_step` returns the rows of all of them as four arrays, plus the
-answers of the few workers with more to say: nothing per worker on the driver's side.
+answers of the few workers with more to say: nothing per worker on the driver's side. Those
+steps go over a direct TCP line to the driver (:meth:`NodeRelay.open_line`,
+:mod:`chronogym.vector.relay_channel`), not a Ray call each.
 
-Security: the driver and a relay talk through Ray's own (authenticated) channel; a relay and
-its workers through Unix sockets in a private folder of their node. No TCP listener is
-opened.
+Security: the driver and a relay talk through Ray's own (authenticated) channel, and for
+the barrier step over a TCP line that the relay accepts only from the peer holding a token
+it handed out through Ray; a relay and its workers through Unix sockets in a private folder
+of their node.
 
 Faults: a worker whose socket fails (EOF, a reset, ``step_timeout``) is reported lost by the
 relay, and the driver replaces it as any lost worker, then connects its replacement. A relay
@@ -31,16 +34,20 @@ their replacements' nodes.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import shutil
 import socket
 import tempfile
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
+from chronogym.vector.relay_channel import RelayLine
 from chronogym.vector.shared_step import SharedLayout, SharedStep
 from chronogym.vector.wire_format import ANSWER, REQUEST, fill
 
@@ -52,6 +59,21 @@ ANSWERED, LOST, SILENT = "answered", "lost", "silent"
 #: and truncations, in the order of its block, and the RelayAnswers of the workers with more
 #: to say (infos, restarts, an env's error, a loss).
 SharedRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[RelayAnswer]]
+
+
+T = TypeVar("T")
+
+
+def locked(method: Callable[..., T]) -> Callable[..., T]:
+    """Run ``method`` under the relay's lock: its TCP line's thread steps too, so one thing
+    at a time touches the sockets and the block."""
+
+    @functools.wraps(method)
+    def under_lock(self: NodeRelay, *args: Any, **kwargs: Any) -> T:
+        with self.lock:
+            return method(self, *args, **kwargs)
+
+    return under_lock
 
 
 class NodeRelay:
@@ -68,6 +90,8 @@ class NodeRelay:
         self.opened = 0
         self.shared: SharedStep | None = None  # the shared-memory step of some workers here
         self.shared_workers: list[int] = []  # its workers, in the order of its block
+        self.line: RelayLine | None = None  # the driver's TCP line for the shared step
+        self.lock = threading.RLock()  # see :func:`locked`
 
     def node_id(self) -> str:
         import ray
@@ -94,10 +118,12 @@ class NodeRelay:
             sock.close()
             return False
         sock.settimeout(self.step_timeout)
-        self.socks[worker] = sock
-        self.bufs[worker] = bytearray(4096)
+        with self.lock:
+            self.socks[worker] = sock
+            self.bufs[worker] = bytearray(4096)
         return True
 
+    @locked
     def disconnect(self, worker: int) -> None:
         sock = self.socks.pop(worker, None)
         self.bufs.pop(worker, None)
@@ -105,6 +131,7 @@ class NodeRelay:
             with contextlib.suppress(OSError):
                 sock.close()
 
+    @locked
     def step(self, requests: list[tuple[int, bytes, bool]]) -> list[RelayAnswer]:
         """Send each worker its action bytes, then read every answer (raw bytes)."""
         failed: dict[int, RelayAnswer] = {}
@@ -128,6 +155,7 @@ class NodeRelay:
                 answers.append(self._failed(worker, error))
         return answers
 
+    @locked
     def open_shared(
         self,
         workers: list[int],
@@ -155,8 +183,35 @@ class NodeRelay:
             sock.settimeout(self.step_timeout)
         return True
 
-    def shared_step(self, actions: np.ndarray) -> SharedRows:
-        """One barrier step of the attached workers (``actions``: their rows, in block order)."""
+    @locked
+    def open_line(self) -> tuple[tuple[str, int], bytes] | None:
+        """A TCP listener on this node for one driver connection that serves the shared
+        step (:mod:`chronogym.vector.relay_channel`): its address and the token the driver
+        must send; None without a shared step, or if no listener could be opened."""
+        import ray
+
+        if self.shared is None:
+            return None
+        self.close_line()
+        try:
+            line = RelayLine(ray.util.get_node_ip_address(), self.accept_timeout)
+        except OSError:
+            return None
+        layout = self.shared.layout
+        line.serve(layout.num_envs, layout.action_row, self.shared_step)
+        self.line = line
+        return line.address, line.token
+
+    @locked
+    def close_line(self) -> None:
+        line, self.line = self.line, None
+        if line is not None:
+            line.close()
+
+    @locked
+    def shared_step(self, actions: np.ndarray | memoryview) -> SharedRows:
+        """One barrier step of the attached workers (``actions``: their rows' bytes, in
+        block order); the line's thread calls it too."""
         shared, workers = self.shared, self.shared_workers
         if shared is None:
             raise RuntimeError("this relay holds no shared step: open_shared() first")
@@ -172,8 +227,11 @@ class NodeRelay:
         rows = (answers.obs, answers.rewards, answers.terminations, answers.truncations)
         return (*rows, list(answers.extras.values()))
 
+    @locked
     def close_shared(self) -> None:
-        """Close the shared step (its workers go back to steps over their sockets)."""
+        """Close the shared step and its line (its workers go back to steps over their
+        sockets)."""
+        self.close_line()
         if self.shared is not None:
             self.shared.close()
         self.shared, self.shared_workers = None, []

@@ -87,8 +87,9 @@ class SerialVectorEnv(WorkerVectorEnv):
         **ray_only: ``RayVectorEnv``'s arguments about Ray and processes
             (``num_cpus``, ``num_gpus``, ``address``, ``worker_niceness``,
             ``scheduling``, ``step_timeout``, ``start_timeout``, ``transport``,
-            ``spin_us``, ``shared_memory``, ``driver_worker``) have no meaning here: each raises a
-            TypeError that names it, as does any other unknown name.
+            ``spin_us``, ``shared_memory``, ``relay_tcp``, ``driver_worker``) have
+            no meaning here: each raises a TypeError that names it, as does any
+            other unknown name.
     """
 
     def __init__(
@@ -136,6 +137,7 @@ RAY_ONLY_ARGUMENTS: dict[str, str] = {
     "transport": "how the driver reaches the worker processes",
     "spin_us": "how long the driver's socket spins waiting for a worker process",
     "shared_memory": "whether the worker processes answer a step through shared memory",
+    "relay_tcp": "whether the relays of other nodes answer a step over a TCP connection",
     "driver_worker": "whether the driver steps the last worker's envs itself; here it steps "
     "them all",
 }

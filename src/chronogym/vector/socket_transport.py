@@ -288,11 +288,13 @@ class SocketBackend(ActorBackend):
         *args: Any,
         spin_us: float | None = None,
         shared_memory: bool = True,
+        relay_tcp: bool = True,
         **kwargs: Any,
     ) -> None:
         super().__init__(*args, **kwargs)
         self.spin_us = check_spin_us(spin_us)
         self.shared_memory = shared_memory  # barrier steps through shared memory, if it can
+        self.relay_tcp = relay_tcp  # other nodes' relays answer them over TCP, if they can
         #: Wake the workers in groups (None: when there are enough and each has a core,
         #: :func:`~chronogym.vector.shared_step.wants_tree`); read at the first step.
         self.wake_tree: bool | None = None
@@ -474,6 +476,7 @@ class SocketBackend(ActorBackend):
             "tree": self.wake_tree,
             "timeout": self.start_timeout,
             "step_timeout": self.step_timeout,
+            "lines": self.relay_tcp,
         }
         action_row = actions.nbytes // slices[-1][1]
         spread = SpreadStep.open(

@@ -5,14 +5,15 @@ With every worker on the driver's node, a barrier step goes through one shared b
 relays (:mod:`chronogym.vector.relay`) holds such a block for its node's workers
 (:meth:`~chronogym.vector.relay.NodeRelay.open_shared`). A step then costs the driver:
 
-1. one Ray call per other node, carrying that node's action rows (sent first, so every
-   node steps while the driver waits);
+1. one frame per other node, carrying that node's action rows over a TCP line to its relay
+   (:mod:`chronogym.vector.relay_channel`; a Ray call where no line could be opened), sent
+   first, so every node steps while the driver waits;
 2. the driver's own block for the workers on its node, if it has any;
 3. one copy of each node's returned rows into the batch.
 
 The driver does nothing per worker, except for a worker with more to say (infos,
 restarts, an env's error, a loss), whose answer comes whole, as over its socket. A relay
-whose call fails (its node died) makes all of its workers lost.
+whose line or call fails (its node died) makes all of its workers lost.
 
 A :class:`SpreadStep` serves one placement of the workers. The backend marks it
 ``stale`` when a worker is lost or replaced (the replacement may land on another node)
@@ -31,10 +32,13 @@ import numpy as np
 
 from chronogym.vector.backend import Outcome
 from chronogym.vector.relay import LOST, Relays
+from chronogym.vector.relay_channel import DriverLine
 from chronogym.vector.shared_step import SharedAnswers, SharedLayout, SharedStep
 
 #: the driver's node in :class:`NodeRows` (a relay's node is its Ray node id)
 HERE = ""
+#: seconds to reach a relay's TCP line before that node stays on Ray calls (a firewall)
+DIAL_TIMEOUT_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,7 @@ class SpreadStep:
     def __init__(self, here: NodeRows | None, remote: list[NodeRows], obs_row: int) -> None:
         self.here, self.remote, self.obs_row = here, remote, obs_row
         self.local: SharedStep | None = None  # the driver's block, for the workers here
+        self.lines: dict[str, DriverLine] = {}  # node -> its relay's TCP line (else Ray calls)
         self.stale = False  # a worker was lost or replaced: open a new one
         self.steps = 0
 
@@ -99,8 +104,8 @@ class SpreadStep:
         """Attach every worker to its node's block (the driver's own for its node); None if
         one could not (``drop(w)``: a worker of this node that could not, whose socket may
         be midway through a message). ``options``: ``directory`` (of the driver's block),
-        ``spin_s``, ``tree`` (None: each node decides), ``timeout`` (to attach) and
-        ``step_timeout``."""
+        ``spin_s``, ``tree`` (None: each node decides), ``timeout`` (to attach),
+        ``step_timeout`` and ``lines`` (False: every node's step is a Ray call)."""
         import ray
 
         here = next((g for g in groups if g.node == HERE), None)
@@ -129,7 +134,27 @@ class SpreadStep:
         except Exception:
             step.close(relays)
             return None
+        if options.get("lines", True):
+            dial = DIAL_TIMEOUT_S if options["timeout"] is None else options["timeout"]
+            step.open_lines(relays, min(dial, DIAL_TIMEOUT_S))
         return step
+
+    def open_lines(self, relays: Relays, timeout: float | None) -> None:
+        """Dial each relay's TCP line; a node whose line cannot be opened stays on Ray calls."""
+        import ray
+
+        refs = [relays.by_node[g.node].open_line.remote() for g in self.remote]
+        for group, ref in zip(self.remote, refs, strict=True):
+            try:
+                offer = ray.get(ref, timeout=timeout)
+            except Exception:
+                offer = None
+            if offer is None:
+                continue
+            (host, port), token = offer
+            line = DriverLine.dial((host, port), token, len(group.rows), self.obs_row, timeout)
+            if line is not None:
+                self.lines[group.node] = line
 
     def step(
         self,
@@ -145,10 +170,18 @@ class SpreadStep:
 
         n = len(actions)
         flat = actions.reshape(n, -1)
-        refs = [
-            relays.by_node[g.node].shared_step.remote(np.ascontiguousarray(flat[g.rows]))
-            for g in self.remote
-        ]
+        sent: list[Any] = []  # per remote node: its line, a Ray ref, or the send's error
+        for g in self.remote:
+            rows = np.ascontiguousarray(flat[g.rows])
+            line = self.lines.get(g.node)
+            if line is None:
+                sent.append(relays.by_node[g.node].shared_step.remote(rows))
+                continue
+            try:
+                line.send(rows, handlers.relay_timeout)
+                sent.append(line)
+            except OSError as error:
+                sent.append(error)
         self.steps += 1
         obs = np.zeros((n, self.obs_row), np.uint8)
         rewards = np.zeros(n, np.float64)
@@ -166,11 +199,20 @@ class SpreadStep:
             obs[here.rows], rewards[here.rows] = got.obs, got.rewards
             terminations[here.rows], truncations[here.rows] = got.terminations, got.truncations
             extras.update({here.workers[i]: outcome for i, outcome in got.extras.items()})
-        for group, ref in zip(self.remote, refs, strict=True):
+        for group, way in zip(self.remote, sent, strict=True):
             try:
-                rows = ray.get(ref, timeout=handlers.relay_timeout)
+                if isinstance(way, BaseException):
+                    raise way
+                rows = (
+                    way.receive()
+                    if isinstance(way, DriverLine)
+                    else ray.get(way, timeout=handlers.relay_timeout)
+                )
             except Exception as error:
                 why = f"the relay of node {group.node} failed: {type(error).__name__}: {error}"
+                line = self.lines.pop(group.node, None)
+                if line is not None:
+                    line.close()
                 relays.drop_node(group.node)
                 for w in group.workers:
                     extras[w] = handlers.relayed(w, (LOST, why))
@@ -187,6 +229,9 @@ class SpreadStep:
         if self.local is not None:
             self.local.close()
             self.local = None
+        for line in self.lines.values():
+            line.close()
+        self.lines = {}
         for group in self.remote if relays is not None else []:
             actor = relays.by_node.get(group.node)  # type: ignore[union-attr]
             if actor is not None:
