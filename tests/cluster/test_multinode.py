@@ -264,6 +264,9 @@ def test_a_spread_step_falls_back_where_it_cannot_open(cluster, monkeypatch, fai
         assert any(vec._backend.relayed())
         assert vec._backend.shared_memory == (fails == "line") and tcp_lines(vec) == 0
         assert spread_steps(vec) == (12 if fails == "line" else 0)
+        relays = vec._backend._relays
+        if fails == "line":  # not dialled again at the next spread step
+            assert relays.lineless == set(relays.by_node)
     finally:
         vec.close()
     for mine, theirs in zip(got[1:], serial[1:], strict=True):

@@ -295,6 +295,7 @@ class Relays:
     by_node: dict[str, Any] = field(default_factory=dict)  # node id -> NodeRelay actor
     node_of: dict[int, str] = field(default_factory=dict)  # relayed worker -> node id
     pending: dict[str, list[RelayHandle]] = field(default_factory=dict)  # not sent yet
+    lineless: set[str] = field(default_factory=set)  # nodes whose TCP line failed to open
 
     def relay(self, node: str) -> Any:
         """The relay of ``node``, started there if there is none yet."""

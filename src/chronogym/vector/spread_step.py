@@ -140,20 +140,25 @@ class SpreadStep:
         return step
 
     def open_lines(self, relays: Relays, timeout: float | None) -> None:
-        """Dial each relay's TCP line; a node whose line cannot be opened stays on Ray calls."""
+        """Dial each relay's TCP line; a node whose line cannot be opened stays on Ray calls,
+        and is not dialled again (``relays.lineless``: a firewall would cost each new spread
+        step the dial's timeout again)."""
         import ray
 
-        refs = [relays.by_node[g.node].open_line.remote() for g in self.remote]
-        for group, ref in zip(self.remote, refs, strict=True):
+        groups = [g for g in self.remote if g.node not in relays.lineless]
+        refs = [relays.by_node[g.node].open_line.remote() for g in groups]
+        for group, ref in zip(groups, refs, strict=True):
             try:
                 offer = ray.get(ref, timeout=timeout)
             except Exception:
                 offer = None
-            if offer is None:
-                continue
-            (host, port), token = offer
-            line = DriverLine.dial((host, port), token, len(group.rows), self.obs_row, timeout)
-            if line is not None:
+            line = None
+            if offer is not None:
+                (host, port), token = offer
+                line = DriverLine.dial((host, port), token, len(group.rows), self.obs_row, timeout)
+            if line is None:
+                relays.lineless.add(group.node)
+            else:
                 self.lines[group.node] = line
 
     def step(
