@@ -47,19 +47,16 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from chronogym.vector.relay_channel import RelayLine
+from chronogym.vector.relay_channel import (
+    ANSWERED,
+    LOST,
+    SILENT,
+    RelayAnswer,
+    RelayLine,
+    SharedRows,
+)
 from chronogym.vector.shared_step import SharedLayout, SharedStep
 from chronogym.vector.wire_format import ANSWER, REQUEST, fill
-
-#: What a relay returns per worker: (worker, ANSWERED, the answer's bytes), or (worker, LOST
-#: or SILENT, why): its socket failed, or it did not answer within ``step_timeout``.
-RelayAnswer = tuple[int, str, Any]
-ANSWERED, LOST, SILENT = "answered", "lost", "silent"
-#: What a relay's shared step returns: its workers' obs rows (uint8), rewards, terminations
-#: and truncations, in the order of its block, and the RelayAnswers of the workers with more
-#: to say (infos, restarts, an env's error, a loss).
-SharedRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[RelayAnswer]]
-
 
 T = TypeVar("T")
 

@@ -42,16 +42,20 @@ EXTRA = struct.Struct("<IBI")  # worker, kind (an index in KINDS), bytes that fo
 OK, FAILED = 0, 1
 READY = b"\x01"  # the relay's answer to a valid token
 TOKEN_TIMEOUT_S = 2.0  # a peer's time to send its token once connected
-#: What a line's answers say about a worker (:data:`chronogym.vector.relay.RelayAnswer`'s
-#: kinds), in wire order; ANSWERED carries the answer's bytes, the others a reason.
-KINDS = ("answered", "lost", "silent")
+#: What a relay says about a worker, in wire order (:mod:`chronogym.vector.relay` names them
+#: ANSWERED, LOST, SILENT): answered carries the answer's bytes, the others a reason.
+KINDS = ANSWERED, LOST, SILENT = ("answered", "lost", "silent")
 
-#: One relayed worker's (worker, kind, bytes or reason), as a relay's shared step returns it.
-Extra = tuple[int, str, Any]
-Rows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[Extra]]
+#: What a relay returns per worker: (worker, ANSWERED, the answer's bytes), or (worker, LOST
+#: or SILENT, why): its socket failed, or it did not answer within ``step_timeout``.
+RelayAnswer = tuple[int, str, Any]
+#: What a relay's shared step returns: its workers' obs rows (uint8), rewards, terminations
+#: and truncations, in the order of its block, and the RelayAnswers of the workers with more
+#: to say (infos, restarts, an env's error, a loss).
+SharedRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[RelayAnswer]]
 
 
-def encode_extras(extras: list[Extra]) -> bytes:
+def encode_extras(extras: list[RelayAnswer]) -> bytes:
     """The answers of workers with more to say, as bytes (no pickle)."""
     parts = []
     for worker, kind, value in extras:
@@ -60,7 +64,7 @@ def encode_extras(extras: list[Extra]) -> bytes:
     return b"".join(parts)
 
 
-def decode_extras(view: memoryview) -> list[Extra]:
+def decode_extras(view: memoryview) -> list[RelayAnswer]:
     """:func:`encode_extras`'s answers back; reasons as text, answers as bytes."""
     extras, at = [], 0
     while at < len(view):
@@ -69,7 +73,7 @@ def decode_extras(view: memoryview) -> list[Extra]:
         data = bytes(view[at : at + size])
         at += size
         name = KINDS[kind]
-        extras.append((worker, name, data if name == "answered" else data.decode()))
+        extras.append((worker, name, data if name == ANSWERED else data.decode()))
     return extras
 
 
@@ -87,7 +91,7 @@ class RelayLine:
         self.conn: socket.socket | None = None
         self.thread: threading.Thread | None = None
 
-    def serve(self, rows: int, action_row: int, step: Callable[[memoryview], Rows]) -> None:
+    def serve(self, rows: int, action_row: int, step: Callable[[memoryview], SharedRows]) -> None:
         """Start serving: each frame (``rows`` times ``action_row`` action bytes) goes to
         ``step``, whose rows go back."""
         self.thread = threading.Thread(
@@ -117,7 +121,7 @@ class RelayLine:
             with contextlib.suppress(OSError):
                 self.listener.close()
 
-    def _run(self, action_bytes: int, step: Callable[[memoryview], Rows]) -> None:
+    def _run(self, action_bytes: int, step: Callable[[memoryview], SharedRows]) -> None:
         conn = self._accept()
         if conn is None:
             return
@@ -193,7 +197,7 @@ class DriverLine:
         self.sock.settimeout(timeout)
         self.sock.sendall(FRAME.pack(actions.nbytes) + actions.tobytes())
 
-    def receive(self) -> Rows:
+    def receive(self) -> SharedRows:
         """The node's rows for the step sent; OSError or EOFError if the line failed, or
         RuntimeError with the relay's reason if its step raised."""
         buf, n = self.buf, self.rows
@@ -212,7 +216,7 @@ class DriverLine:
         rewards = np.frombuffer(buf, np.float64, n, at)
         terminations = np.frombuffer(buf, np.bool_, n, at + 8 * n)
         truncations = np.frombuffer(buf, np.bool_, n, at + 9 * n)
-        extras: list[Extra] = []
+        extras: list[RelayAnswer] = []
         if size:
             tail = bytearray(size)
             fill(self.sock, memoryview(tail), 0, size)
