@@ -35,6 +35,10 @@ walk of every configuration, and the ratio of each to the first configuration's,
 JSON, and a dotted line marks each on the figure. ``--pychrono-commit`` records the commit
 PyChrono was built from in the machine record.
 
+``--iterations N`` also stops each configuration after N PPO iterations (whichever of the two
+budgets comes first), e.g. to run a slower configuration exactly to the checkpoint at which
+another walked: the same seed gives it the same policy there.
+
 ``--merge DIR ...`` only joins the results of invocations run apart (each its own ``--out``,
 e.g. one configuration per sitting) into one figure and JSON in ``--out``: the comparisons
 are made again against the first folder's first configuration, and each part keeps its date
@@ -83,8 +87,9 @@ def parse_config(name: str) -> tuple[str, int]:
 def run_config(
     name: str, minutes: float, out: Path, runs: Path, seed: int, **train_kwargs: object
 ) -> dict:
-    """Train one configuration (``train_kwargs`` go to ``train_quadruped``, e.g. ``resume``);
-    its summary. Iterations and env steps count this run only, also when it resumes."""
+    """Train one configuration (``train_kwargs`` go to ``train_quadruped``, e.g. ``resume``
+    or an ``iterations`` cap); its summary. Iterations and env steps count this run only,
+    also when it resumes."""
     from chronogym.tasks.quadruped.training import QUADRUPED_PPO, train_quadruped
 
     backend, num_envs = parse_config(name)
@@ -339,7 +344,8 @@ def merge_results(folders: list[Path], out: Path) -> dict[str, Any]:
     walk_ratios(summaries)
     parts = [
         {"configs": [s["config"] for s in record["configs"]], "date": record["date"],
-         "machine": record["machine"], "minutes_per_config": record["minutes_per_config"]}
+         "machine": record["machine"], "minutes_per_config": record["minutes_per_config"],
+         "iterations_cap": record.get("iterations_cap")}
         for _, record in records
     ]  # fmt: skip
     minutes = sorted({part["minutes_per_config"] for part in parts})
@@ -352,6 +358,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=None, help="budget per configuration")
     parser.add_argument("--full", action="store_true", help=f"{FULL_MINUTES:g} min each")
+    parser.add_argument(
+        "--iterations",
+        type=int,
+        help="also stop each configuration after this many PPO iterations (default: no cap)",
+    )
     parser.add_argument("--engine", choices=sorted(ENGINE_FOLDERS), default="mujoco")
     parser.add_argument("--resume", type=Path, help="checkpoint to start from (default: scratch)")
     parser.add_argument("--finetune", action="store_true", help="the paper's conservative PPO")
@@ -392,6 +403,8 @@ def main() -> None:
     check_run_flags(parser, args, minutes)
     if args.resume is not None and not args.resume.is_file():
         parser.error(f"--resume={args.resume}: no such checkpoint file")
+    if args.iterations is not None and args.iterations < 1:
+        parser.error(f"--iterations={args.iterations}: expected an integer >= 1")
     if args.save_interval is not None and args.save_interval < 1:
         parser.error(f"--save-interval={args.save_interval}: expected an integer >= 1")
     if args.finetune and args.resume is None:
@@ -404,6 +417,8 @@ def main() -> None:
         parser.error(f"--engine {args.engine}: {error}")
     start = f"fine-tuned from {args.resume}" if args.resume else "from scratch"
     extra: dict[str, Any] = {}
+    if args.iterations is not None:
+        extra["iterations"] = args.iterations
     if args.save_interval is not None:
         from chronogym.tasks.quadruped.training import quadruped_train_config
 
@@ -423,7 +438,7 @@ def main() -> None:
     write_results(
         summaries, args.out, "rl_scaling", title, minutes_per_config=minutes, seed=args.seed,
         engine=args.engine, start=start, save_interval=args.save_interval,
-        pychrono_commit=args.pychrono_commit, task=quadruped_task(),
+        iterations_cap=args.iterations, pychrono_commit=args.pychrono_commit, task=quadruped_task(),
     )  # fmt: skip
 
 

@@ -53,6 +53,33 @@ def test_free_fall_readers(chrono):
     np.testing.assert_allclose(body_ang_vel(body), 0, atol=1e-12)
 
 
+def test_renewed_collision_system_keeps_every_contact(chrono):
+    """A box resting on the ground stays there across a renewal: every model is bound again
+    in a new collision system (a model left unbound would let the box fall through)."""
+    from chronogym.engines.chrono import body_pos, renew_collision_system
+
+    system = chrono.ChSystemNSC()
+    system.SetCollisionSystemType(chrono.ChCollisionSystem.Type_BULLET)
+    system.SetGravitationalAcceleration(chrono.ChVector3d(0, 0, -G))
+    material = chrono.ChContactMaterialNSC()
+    ground = chrono.ChBodyEasyBox(2, 2, 0.2, 1000, False, True, material)
+    ground.SetFixed(True)
+    ground.SetPos(chrono.ChVector3d(0, 0, -0.1))
+    box = chrono.ChBodyEasyBox(0.2, 0.2, 0.2, 1000, False, True, material)
+    box.SetPos(chrono.ChVector3d(0, 0, 0.12))
+    system.Add(ground)
+    system.Add(box)
+    for _ in range(300):
+        system.DoStepDynamics(1e-3)
+    resting, contacts = body_pos(box)[2], system.GetNumContacts()
+    assert 0.09 < resting < 0.11 and contacts > 0
+    renew_collision_system(system)
+    for _ in range(300):
+        system.DoStepDynamics(1e-3)
+    assert body_pos(box)[2] == pytest.approx(resting, abs=1e-3)
+    assert system.GetNumContacts() == contacts
+
+
 def test_advancer_checks_who_steps_a_real_system(chrono):
     """The first tick reads ``GetChTime`` of a real ChSystem: one listing passes, two fail."""
     from chronogym import Advancer

@@ -102,3 +102,17 @@ def test_merge_refuses_parts_that_differ_or_repeat(tmp_path):
         merge_results([ray, again], tmp_path / "out")
     with pytest.raises(ValueError, match="no rl_scaling.json"):
         merge_results([ray, tmp_path], tmp_path / "out")
+
+
+def test_iterations_below_one_is_a_usage_error():
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-m", "benchmarks.rl.rl_scaling", "--iterations", "0"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    assert "--iterations=0: expected an integer >= 1" in run.stderr

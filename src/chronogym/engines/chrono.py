@@ -148,6 +148,39 @@ def system_bodies(system: Any) -> list[Any]:
     return list(probe(system, BODY_LISTS)())
 
 
+def renew_collision_system(system: Any) -> None:
+    """Give ``system`` a new Bullet collision system, every collision model bound again.
+
+    Bullet keeps state from step to step that no body setter reaches: its persistent contact
+    manifolds, its broadphase tree (rebalanced a little every step from a cursor that moves
+    on) and the order of its pair cache. After a long episode they change the order in which
+    the next contacts are found, which changes the iterative solver's result by ~1e-8, and
+    contacts amplify that: an episode started by ``reset`` would differ from the same episode
+    in a fresh env. A new collision system starts as a fresh env's did. Call it after the
+    bodies are in place: the new broadphase is built around their current positions.
+
+    Only Bullet (Chrono's default) is renewed: Chrono's multicore collision system cannot
+    remove a model (Chrono 10 raises "not yet implemented"); it rebuilds its broadphase every
+    step, but whether anything else of it persists is not checked. A PyChrono before 9.0 (no
+    ``UnbindItem``) keeps its collision system too.
+    """
+    chrono = import_pychrono()
+    old = system.GetCollisionSystem()
+    bullet = getattr(chrono.ChCollisionSystem, "Type_BULLET", None)
+    if old is None or not hasattr(old, "UnbindItem") or bullet is None:
+        return
+    if int(old.GetType()) != int(bullet):
+        return
+    items = system_bodies(system)
+    if hasattr(system, "GetOtherPhysicsItems"):  # e.g. particle clouds
+        items += list(system.GetOtherPhysicsItems())
+    for item in items:  # detach every model first: none may point into the old system
+        old.UnbindItem(item)
+    new = chrono.ChCollisionSystemBullet()
+    system.SetCollisionSystem(new)
+    new.Initialize()  # binds every collision model of the system
+
+
 # --- writing state ---------------------------------------------------------------------------
 
 
@@ -225,12 +258,14 @@ class SystemSnapshot:
         """Write the saved body states back, set the time to 0 and update the system.
 
         ``Update()`` recomputes what the links cached from the old positions
-        (constraint residuals, Jacobians); without it the next step differs.
+        (constraint residuals, Jacobians); without it the next step differs. The collision
+        system is then a new one (:func:`renew_collision_system`), as in a fresh env.
         """
         for body, s in self.states:
             set_body_state(body, pos=s[:3], rot=s[3:7], lin_vel=s[7:10], ang_vel=s[10:13])
         self.system.SetChTime(0.0)
         self.system.Update()
+        renew_collision_system(self.system)
 
 
 # --- actions ---------------------------------------------------------------------------------

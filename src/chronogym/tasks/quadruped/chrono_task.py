@@ -30,6 +30,7 @@ from chronogym.engines.chrono import (
     body_lin_vel,
     body_pos,
     body_rot,
+    renew_collision_system,
     set_body_state,
     vec3,
 )
@@ -216,6 +217,9 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
             set_body_state(body, pos=d.xipos[b], rot=rot, lin_vel=zero, ang_vel=zero)
         self.system.SetChTime(0.0)
         self.system.Update()
+        # no contact history from earlier episodes; after the poses are set, so that the new
+        # broadphase is built around them as a fresh env's is
+        renew_collision_system(self.system)
         if self.scm is not None:
             self.scm.reset()
         self.servos.set_targets(DEFAULT_JOINT_POS)
