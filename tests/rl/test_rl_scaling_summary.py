@@ -10,7 +10,13 @@ import math
 
 import pytest
 
-from benchmarks.rl.rl_scaling import compare_to_first, merge_results, reward_milestones, same_curve
+from benchmarks.rl.rl_scaling import (
+    compare_to_first,
+    main,
+    merge_results,
+    reward_milestones,
+    same_curve,
+)
 
 
 def rows(rewards: list[float], seconds_per_row: float, steps_per_row: int = 100) -> list[dict]:
@@ -104,15 +110,9 @@ def test_merge_refuses_parts_that_differ_or_repeat(tmp_path):
         merge_results([ray, tmp_path], tmp_path / "out")
 
 
-def test_iterations_below_one_is_a_usage_error():
-    import subprocess
-    import sys
-
-    run = subprocess.run(
-        [sys.executable, "-m", "benchmarks.rl.rl_scaling", "--iterations", "0"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert run.returncode == 2
-    assert "--iterations=0: expected an integer >= 1" in run.stderr
+def test_iterations_below_one_is_a_usage_error(monkeypatch, capsys):
+    monkeypatch.setattr("sys.argv", ["rl_scaling", "--iterations", "0"])
+    with pytest.raises(SystemExit) as stopped:
+        main()
+    assert stopped.value.code == 2
+    assert "--iterations=0: expected an integer >= 1" in capsys.readouterr().err

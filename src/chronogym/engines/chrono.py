@@ -181,6 +181,16 @@ def renew_collision_system(system: Any) -> None:
     new.Initialize()  # binds every collision model of the system
 
 
+def finish_reset(system: Any) -> None:
+    """After a reset has written every body's state: time 0, ``Update()`` (the links' cached
+    residuals and Jacobians are those of the old positions; without it the next step differs)
+    and a new collision system built around the new positions (:func:`renew_collision_system`),
+    so that the episode is the one a fresh env would run."""
+    system.SetChTime(0.0)
+    system.Update()
+    renew_collision_system(system)
+
+
 # --- writing state ---------------------------------------------------------------------------
 
 
@@ -255,17 +265,10 @@ class SystemSnapshot:
         self.states = [(body, body_state(body)) for body in system_bodies(system)]
 
     def restore(self) -> None:
-        """Write the saved body states back, set the time to 0 and update the system.
-
-        ``Update()`` recomputes what the links cached from the old positions
-        (constraint residuals, Jacobians); without it the next step differs. The collision
-        system is then a new one (:func:`renew_collision_system`), as in a fresh env.
-        """
+        """Write the saved body states back, then :func:`finish_reset`."""
         for body, s in self.states:
             set_body_state(body, pos=s[:3], rot=s[3:7], lin_vel=s[7:10], ang_vel=s[10:13])
-        self.system.SetChTime(0.0)
-        self.system.Update()
-        renew_collision_system(self.system)
+        finish_reset(self.system)
 
 
 # --- actions ---------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ from chronogym.engines.chrono import (
     body_lin_vel,
     body_pos,
     body_rot,
-    renew_collision_system,
+    finish_reset,
     set_body_state,
     vec3,
 )
@@ -215,11 +215,7 @@ class ChronoGo1VelocityTask(Go1VelocityBase, ChronoTask):
         for body, b in zip(self.robot.bodies, self._body_ids, strict=True):
             rot = quat_from_matrix(d.ximat[b].reshape(3, 3))
             set_body_state(body, pos=d.xipos[b], rot=rot, lin_vel=zero, ang_vel=zero)
-        self.system.SetChTime(0.0)
-        self.system.Update()
-        # no contact history from earlier episodes; after the poses are set, so that the new
-        # broadphase is built around them as a fresh env's is
-        renew_collision_system(self.system)
+        finish_reset(self.system)
         if self.scm is not None:
             self.scm.reset()
         self.servos.set_targets(DEFAULT_JOINT_POS)
