@@ -16,7 +16,9 @@ summary and ``rl_scaling.png``.
 Configuration names are ``<backend>-<n_env>``; the serial backend steps its envs one after
 another in the training process (the paper's "no Ray" baseline, same env code).
 ``--engine chrono`` trains the same task in Project Chrono (PyChrono needed; results in
-``results/rl_scaling_chrono/``), the engine the paper ran its quadruped in; ``--resume CKPT``
+``results/rl_scaling_chrono/`` unless ``--out`` says otherwise: the figure from scratch since
+Chrono's resets are free of history is ``results/rl_scaling_chrono_fresh_resets/``), the
+engine the paper ran its quadruped in; ``--resume CKPT``
 starts every configuration from a checkpoint (e.g. a MuJoCo-trained ``best.pt``) instead of
 from scratch, with ``--finetune`` under the paper's conservative PPO settings (results in
 ``results/rl_scaling_chrono_finetune/``, checkpoints in ``runs/rl_scaling_chrono_finetune/``).

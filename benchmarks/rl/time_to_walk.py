@@ -503,9 +503,9 @@ def merged_settings(
 
 def load_earlier(sources: list[Path], running: set[tuple[str, int]]) -> dict[str, Any]:
     """The rows, run summaries, settings, machine records and configuration order in the
-    result folders
-    ``sources`` (a later folder's run replaces an earlier one's) of the runs (configuration,
-    seed) that are not in ``running``."""
+    result folders ``sources`` of the runs (configuration, seed) that are not in ``running``.
+    A later folder's run replaces an earlier one's, and its settings (and machine record)
+    those of the configuration; the settings list the seeds of every run kept."""
     found: dict[tuple[str, int], dict[str, Any]] = {}
     settings_kept: dict[str, Any] = {}
     machines: dict[str, Any] = {}
@@ -524,13 +524,14 @@ def load_earlier(sources: list[Path], running: set[tuple[str, int]]) -> dict[str
                 continue
             mine = [r for r in rows if (r["config"], int(r["seed"])) == key]
             found[key] = {"run": run, "rows": [as_numbers(r) for r in mine]}
-            if run["config"] in record.get("settings", {}):
-                kept = settings_kept.setdefault(run["config"], record["settings"][run["config"]])
-                kept["seeds"] = sorted(set(kept.get("seeds", [])) | {key[1]})
+            if run["config"] in record.get("settings", {}):  # a later folder's settings win
+                settings_kept[run["config"]] = dict(record["settings"][run["config"]])
             name = run["config"]
             machines[name] = record.get("earlier_machines", {}).get(
                 name, {"date": record.get("date"), **record.get("machine", {})}
             )
+    for name, kept in settings_kept.items():  # the seeds of the runs kept, whoever ran them
+        kept["seeds"] = sorted(seed for config, seed in found if config == name)
     return {
         "rows": [r for v in found.values() for r in v["rows"]],
         "runs": [v["run"] for v in found.values()],
