@@ -11,6 +11,13 @@ per vector step (``time.process_time`` of this process, every thread) is measure
 and ``b_cpu``, its slope in W, is the issue's "driver CPU per worker per step". The wall
 time's slope ``b`` also holds what 2 cores cannot hide at large W: the workers' own
 Python per step (receiving, stepping, answering) queues for the 2 cores, most at 0.1 ms.
+``b_thread`` is the same slope of the stepping thread's CPU alone (``time.thread_time``):
+the driver's serial work per worker. The process's other threads (Ray's, in the driver)
+spend CPU per second, not per step or worker (2-3 ms/s at W = 1, 16 and 64 alike, measured
+idle), so on 2 cores, where the step's wall time grows with W, they add to ``b_cpu`` what a
+machine with a core per worker would not see; on the paths whose step is a Ray call per
+worker or node (``actor``, ``multinode_calls``), Ray's threads do per-call work, and there
+``b_cpu`` is the one to read.
 
     python -m benchmarks.vector.scaling --quick          # smoke run, < 2 min
     python -m benchmarks.vector.scaling                  # the full sweep (see --help)
@@ -63,7 +70,8 @@ workers' compute, never the driver's serial work per worker), and ("cores") from
 measured at W = 1 plus the driver's CPU per further worker, ``t(W) = t(1) + b_cpu (W - 1)``:
 what a machine with a core per worker shows when nothing but the driver's serial work grows
 with W (the issue's "measure b as the driver process's CPU time"; the wall time's b on 2
-cores also holds the workers' own wake-ups queueing for the 2 cores). The multi-node paths
+cores also holds the workers' own wake-ups queueing for the 2 cores); "thread" is the same
+with ``b_thread``. The multi-node paths
 make one Ray call per node in use, so W = 1 ... ``--nodes`` also add calls: their fits add
 ``b_cpu`` over W >= ``--nodes`` and its "cores" predictions (:func:`fits`).
 
@@ -117,7 +125,14 @@ from benchmarks.common import (
     write_json,
 )
 from benchmarks.vector.throughput_timing import start_ray
-from chronogym.sizing import StepModel, fit_line, fit_overhead, synthetic_step_s, timed_loop
+from chronogym.sizing import (
+    StepModel,
+    Timed,
+    fit_line,
+    fit_overhead,
+    synthetic_step_s,
+    timed_loop,
+)
 
 DEFAULT_OUT = RESULTS / "scaling.json"
 ENV_ID = "chronogym/Synthetic-v0"
@@ -295,13 +310,12 @@ def zero_actions(vec: Any) -> np.ndarray:
     return np.zeros(space.shape, dtype=space.dtype)
 
 
-def run_barrier(vec: Any, args: argparse.Namespace) -> tuple[int, float, float]:
-    """Barrier ``step``s: (vector steps, wall s, driver CPU s); with ``--pin-driver``, the
-    calling thread on the driver's core meanwhile."""
+def run_barrier(vec: Any, args: argparse.Namespace) -> Timed:
+    """Barrier ``step``s: vector steps, wall s, the driver's CPU s (process and stepping
+    thread); with ``--pin-driver``, the calling thread on the driver's core meanwhile."""
     actions = zero_actions(vec)
     with driver_core(args):
-        timed = timed_loop(lambda: vec.step(actions), args.seconds, args.min_steps, args.warmup)
-    return timed.steps, timed.wall_s, timed.cpu_s
+        return timed_loop(lambda: vec.step(actions), args.seconds, args.min_steps, args.warmup)
 
 
 @contextlib.contextmanager
@@ -355,7 +369,8 @@ def measure(
     vec = built.vec
     vec.set_attr("step_ms", step_ms)
     vec.set_attr("cv", 0.0)
-    steps, wall, cpu = run_barrier(vec, args)
+    timed = run_barrier(vec, args)
+    steps, wall = timed.steps, timed.wall_s
     record = built.record
     num_envs = record["workers"] * record["envs_per_worker"]
     rate = steps * num_envs / wall
@@ -366,7 +381,8 @@ def measure(
         "step_ms": step_ms,
         "steps": steps,
         "wall_ms_per_step": 1e3 * wall / steps,
-        "driver_cpu_ms_per_step": 1e3 * cpu / steps,
+        "driver_cpu_ms_per_step": 1e3 * timed.cpu_s / steps,
+        "driver_thread_cpu_ms_per_step": 1e3 * timed.thread_cpu_s / steps,
         "env_steps_per_s": rate,
         "ideal_env_steps_per_s": ideal_steps_s,
         "efficiency": rate / ideal_steps_s,
@@ -458,8 +474,8 @@ def stragglers(args: argparse.Namespace) -> list[dict[str, Any]]:
         vec.reset(seed=0)
         for cv in STRAGGLER_CVS:
             vec.set_attr("cv", cv)
-            steps, wall, _ = run_barrier(vec, args)
-            barrier = steps * workers / wall
+            timed = run_barrier(vec, args)
+            barrier = timed.steps * workers / timed.wall_s
             done, seconds = run_recv_min_envs(vec, args.seconds, batch)
             exact = run_exact_batch(vec, args.seconds, batch)
             row = {
@@ -517,7 +533,8 @@ def add_relative_efficiency(runs: list[dict[str, Any]]) -> None:
 
 
 def fit_group(rows: list[dict[str, Any]], epw: int) -> dict[str, Any] | None:
-    """a, b (wall) and a_cpu, b_cpu (driver CPU) of one group of runs, in µs."""
+    """a, b (wall), a_cpu, b_cpu (the driver process's CPU) and a_thread, b_thread (its
+    stepping thread's CPU) of one group of runs, in µs."""
     if len({r["workers"] for r in rows}) < 2:
         return None
     workers = [r["workers"] for r in rows]
@@ -525,7 +542,12 @@ def fit_group(rows: list[dict[str, Any]], epw: int) -> dict[str, Any] | None:
     busy = [epw * r["step_ms"] / 1e3 for r in rows]
     a, b = fit_overhead(workers, wall, busy)
     a_cpu, b_cpu = fit_line(workers, [r["driver_cpu_ms_per_step"] / 1e3 for r in rows])
-    return {"a_us": a * 1e6, "b_us": b * 1e6, "a_cpu_us": a_cpu * 1e6, "b_cpu_us": b_cpu * 1e6}
+    out = {"a_us": a * 1e6, "b_us": b * 1e6, "a_cpu_us": a_cpu * 1e6, "b_cpu_us": b_cpu * 1e6}
+    if all("driver_thread_cpu_ms_per_step" in r for r in rows):
+        thread = [r["driver_thread_cpu_ms_per_step"] / 1e3 for r in rows]
+        a_thread, b_thread = fit_line(workers, thread)
+        out.update(a_thread_us=a_thread * 1e6, b_thread_us=b_thread * 1e6)
+    return out
 
 
 def predicted(fit: dict[str, Any], step_ms: float, epw: int, workers: int, bound: bool) -> float:
@@ -572,6 +594,10 @@ def fits(runs: list[dict[str, Any]], nodes: int = 1) -> list[dict[str, Any]]:
                     entry[f"predicted_rel_e_{w}_cores"] = (
                         predicted_on_cores(one[0], fit["b_cpu_us"], w) if one else None
                     )
+                    if "b_thread_us" in fit:
+                        entry[f"predicted_rel_e_{w}_cores_thread"] = (
+                            predicted_on_cores(one[0], fit["b_thread_us"], w) if one else None
+                        )
                     entry[f"predicted_rel_e_{w}"] = predicted(fit, step_ms, epw, w, False)
                     entry[f"predicted_rel_e_{w}_driver_bound"] = predicted(
                         fit, step_ms, epw, w, True
@@ -659,6 +685,8 @@ FIT_COLUMNS = (
     Column("b_cpu us", 8, "{:,.1f}", key="b_cpu_us"),
     Column("E64 cores", 9, "{:.2f}", key="predicted_rel_e_64_cores"),
     Column("E256 cores", 10, "{:.2f}", key="predicted_rel_e_256_cores"),
+    Column("b_thread us", 11, "{:,.1f}", key="b_thread_us"),
+    Column("E256 thread", 11, "{:.2f}", key="predicted_rel_e_256_cores_thread"),
     Column("E64/E1", 6, "{:.2f}", key="predicted_rel_e_64"),
     Column("E256/E1", 7, "{:.2f}", key="predicted_rel_e_256"),
     Column("E64 bound", 9, "{:.2f}", key="predicted_rel_e_64_driver_bound"),
@@ -807,6 +835,7 @@ def main(argv: list[str] | None = None) -> int:
     print("fit t_step = S + a + b*W (S = epw x step ms); driver CPU = a_cpu + b_cpu*W;")
     print("E64/E1, E256/E1: the model's E(W)/E(1); bound: the step at least the driver's CPU;")
     print("cores: t(W) = t(1) + b_cpu (W - 1), a core per worker (only the driver's CPU adds)")
+    print("b_thread: b_cpu of the stepping thread alone; thread: cores with b_thread")
     print("(step ms '-': fitted over every step cost)")
     print(table(FIT_COLUMNS, with_none(FIT_COLUMNS, record["fits"]), rule=True))
     for entry in record["fits"]:

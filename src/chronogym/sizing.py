@@ -156,11 +156,13 @@ def recommend(
 
 @dataclass
 class Timed:
-    """Steps timed in one setting: count, wall and driver CPU seconds."""
+    """Steps timed in one setting: count, wall and driver CPU seconds (``cpu_s``: the whole
+    process, every thread; ``thread_cpu_s``: the thread that made the calls)."""
 
     steps: int
     wall_s: float
     cpu_s: float
+    thread_cpu_s: float = 0.0
 
     @property
     def wall_per_step(self) -> float:
@@ -173,16 +175,17 @@ class Timed:
 
 def timed_loop(step: Any, seconds: float, min_steps: int = 5, warmup: int = 3) -> Timed:
     """``warmup`` untimed calls of ``step()``, then calls until ``seconds`` have passed and
-    ``min_steps`` were made: wall and this process's CPU time."""
+    ``min_steps`` were made: wall, this process's CPU time and the calling thread's."""
     for _ in range(warmup):
         step()
-    steps, cpu, start = 0, time.process_time(), time.perf_counter()
+    steps, cpu, own = 0, time.process_time(), time.thread_time()
+    start = time.perf_counter()
     while True:
         step()
         steps += 1
         wall = time.perf_counter() - start
         if wall >= seconds and steps >= min_steps:
-            return Timed(steps, wall, time.process_time() - cpu)
+            return Timed(steps, wall, time.process_time() - cpu, time.thread_time() - own)
 
 
 def flat_size(space: Any) -> int:

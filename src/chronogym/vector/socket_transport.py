@@ -302,6 +302,7 @@ class SocketBackend(ActorBackend):
         self._spread: SpreadStep | None = None  # some on other nodes: a block per node
         self._dir: str | None = None
         self._socks: list[socket.socket | None] = []
+        self._all_here = False  # every worker connected over a socket (no None in _socks)
         self._pollers: list[select.poll | None] = []
         self._spinners: list[AdaptiveSpin] = []
         self._recv_spinner = AdaptiveSpin(0.0)
@@ -352,6 +353,7 @@ class SocketBackend(ActorBackend):
             self._pollers[w] = None if sock is None else _poller(sock)
             if sock is None:
                 elsewhere.append(w)
+        self._all_here = None not in self._socks
         if elsewhere:
             self._connect_relayed(elsewhere)
 
@@ -393,6 +395,7 @@ class SocketBackend(ActorBackend):
         if self._relays is not None:
             self._relays.forget(w)
         sock, self._socks[w], self._pollers[w] = self._socks[w], None, None
+        self._all_here = False
         if sock is not None:
             with contextlib.suppress(OSError):
                 sock.close()
@@ -428,7 +431,7 @@ class SocketBackend(ActorBackend):
         """A barrier step of every worker through shared memory
         (:mod:`chronogym.vector.shared_step`), for a caller whose :meth:`shares_steps` said
         yes; None when the block cannot be opened (then: one socket message per worker)."""
-        if None in self._socks:  # workers on other nodes: a block per node
+        if not self._all_here:  # workers on other nodes: a block per node
             return self._spread_step(actions, slices, obs_row)
         if self._spread is not None:  # every worker is on this node again
             self._close_spread()
@@ -443,7 +446,7 @@ class SocketBackend(ActorBackend):
         here or to its node's relay)? Cheap: asked before each step's actions are prepared."""
         if not self.shared_memory:
             return False
-        if None not in self._socks or (self._spread is not None and not self._spread.stale):
+        if self._all_here or (self._spread is not None and not self._spread.stale):
             return True
         relayed = self._relays.node_of if self._relays is not None else {}
         return all(s is not None or w in relayed for w, s in enumerate(self._socks))

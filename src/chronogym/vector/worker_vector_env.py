@@ -73,6 +73,7 @@ from chronogym.vector.env_errors import (
 from chronogym.vector.group import resolve_env_id
 from chronogym.vector.in_flight import CallKind, InFlight, PendingCall
 from chronogym.vector.infos import InfoColumns, batch_infos, join_infos
+from chronogym.vector.last_obs import LastObs
 from chronogym.vector.profile import StepProfile, now
 
 logger = logging.getLogger("chronogym")
@@ -143,7 +144,7 @@ class WorkerVectorEnv(VectorEnv):
         self.action_space = batch_space(act_space, self.num_envs)
         self.metadata = {**metadata, "autoreset_mode": self.autoreset_mode}
         self.render_mode = render_mode
-        self._last_parts: list[Any] = [None] * self.num_workers  # obs rows of each worker
+        self._last_parts = LastObs(self.num_workers)  # obs rows of each worker
         self._in_flight = InFlight(backend, self._slices)
         self._packed = isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
         #: bytes of one env's observation (the rows of a shared-memory step)
@@ -321,7 +322,7 @@ class WorkerVectorEnv(VectorEnv):
         never = [
             i
             for w, (lo, hi) in enumerate(self._slices)
-            if self._last_parts[w] is None
+            if self._last_parts.never_reset(w)
             for i in range(lo, hi)
             if not mask[i]
         ]
@@ -361,7 +362,7 @@ class WorkerVectorEnv(VectorEnv):
         """Step every env with one barrier (the synchronous path)."""
         self._check_open()
         self._check_idle("step")
-        if self._last_parts[0] is None:
+        if self._last_parts.never_reset(0):
             raise RuntimeError("step() called before reset(); call reset() first")
         self._check_reset_needed("step()")
         if self.profile is not None:
@@ -399,7 +400,7 @@ class WorkerVectorEnv(VectorEnv):
         obs_space = self.single_observation_space
         kept = answers.obs.view(obs_space.dtype).reshape(self.num_envs, *obs_space.shape)  # type: ignore[misc]
         kept.flags.writeable = False
-        self._last_parts = [kept[lo:hi] for lo, hi in self._slices]
+        self._last_parts.set_all(kept, self._slices)
         return kept.copy(), answers.rewards, answers.terminations, answers.truncations, {}
 
     def _step_parts(
@@ -568,7 +569,7 @@ class WorkerVectorEnv(VectorEnv):
                 "received); expected envs not in flight; call recv() first"
             )
         unreset = [
-            i for w in workers if self._last_parts[w] is None for i in range(*self._slices[w])
+            i for w in workers if self._last_parts.never_reset(w) for i in range(*self._slices[w])
         ]
         if unreset:
             raise RuntimeError(f"send() to envs {unreset} before their first reset(); reset first")
@@ -684,7 +685,7 @@ class WorkerVectorEnv(VectorEnv):
 
     # -- joining -----------------------------------------------------------------------
     def _join_obs(self) -> Any:
-        return join_obs(self.single_observation_space, self._last_parts)
+        return join_obs(self.single_observation_space, list(self._last_parts))
 
     def _join_infos(self, infos_per_env: list[dict[str, Any]]) -> dict[str, Any]:
         return batch_infos(infos_per_env)
