@@ -162,7 +162,7 @@ class Timed:
     steps: int
     wall_s: float
     cpu_s: float
-    thread_cpu_s: float = 0.0
+    thread_cpu_s: float
 
     @property
     def wall_per_step(self) -> float:
