@@ -61,6 +61,18 @@ def test_bench_on_the_cart_pole_prints_table_and_recommendation():
     assert re.search(r"predicted efficiency 0\.\d\d", out)
 
 
+def test_bench_times_forked_workers():
+    result = run_bench(
+        "chronogym/CartPole-v0", "--seconds", "0.2", "--max-workers", "2", "--transport", "fork"
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    out = result.stdout
+    assert "measured (RayVectorEnv, transport='fork'" in out and "this machine has" in out
+    rows = re.findall(rf"^\s+([12])\s+{NUMBER}\s+{NUMBER}\s+{NUMBER}$", out, re.M)
+    assert [r[0] for r in rows] == ["1", "2"], out
+    assert re.search(rf"check on the env itself, 2 workers: step {NUMBER} ms measured", out)
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

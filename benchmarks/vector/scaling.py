@@ -36,6 +36,8 @@ Paths, side by side (the same W, envs per worker and step cost, one after anothe
   the path of workers on other nodes;
 - ``driver_worker``: ``RayVectorEnv(driver_worker=True)``: the driver steps the last of the
   W workers' envs itself (W - 1 Ray workers);
+- ``fork``: ``RayVectorEnv(transport="fork")``: workers forked from a warm process
+  (:mod:`chronogym.vector.fork_transport`), no Ray actors; steps as ``socket``;
 - ``async``: Gymnasium's ``AsyncVectorEnv`` with W subprocesses, one env each (it has no
   envs per worker: skipped at envs_per_worker > 1);
 - ``multinode`` (``--multinode``): ``RayVectorEnv(scheduling="spread")`` on a loopback
@@ -136,7 +138,15 @@ from chronogym.sizing import (
 
 DEFAULT_OUT = RESULTS / "scaling.json"
 ENV_ID = "chronogym/Synthetic-v0"
-LOCAL_PATHS = ("socket", "socket_tree", "socket_messages", "actor", "driver_worker", "async")
+LOCAL_PATHS = (
+    "socket",
+    "socket_tree",
+    "socket_messages",
+    "actor",
+    "driver_worker",
+    "fork",
+    "async",
+)
 MULTINODE_PATHS = ("multinode", "multinode_calls", "multinode_messages")
 ALL_PATHS = (*LOCAL_PATHS, *MULTINODE_PATHS)
 PREDICT_AT = (64, 256)
@@ -242,8 +252,8 @@ def build(path: str, workers: int, epw: int, kwargs: dict[str, Any], address: st
     from chronogym import RayVectorEnv
 
     options: dict[str, Any] = {"envs_per_worker": epw, "env_kwargs": kwargs}
-    if path == "actor":
-        options["transport"] = "actor"
+    if path in ("actor", "fork"):
+        options["transport"] = path
     elif path == "socket_messages":
         options["shared_memory"] = False
     elif path == "driver_worker":

@@ -508,6 +508,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         cores=args.cores,
         target=args.target,
         check=not args.no_check,
+        transport=args.transport,
     )
     print()
     print(format_report(report))

@@ -407,6 +407,11 @@ def add_bench(sub: Any) -> None:
         help="skip the last run, on the env itself, that checks the model",
     )
     bench.add_argument("--address", help=ADDRESS_HELP)
+    bench.add_argument(
+        "--transport",
+        choices=["socket", "actor", "fork"],
+        help="RayVectorEnv's transport to time (default: its default, socket)",
+    )
 
 
 def build_parser() -> Parser:

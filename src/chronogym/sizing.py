@@ -252,6 +252,7 @@ def time_vector_env(
     seconds: float,
     address: str | None,
     envs_per_worker: int = 1,
+    transport: str | None = None,
 ) -> tuple[float, Timed]:
     """Build ``RayVectorEnv(env_id, workers * envs_per_worker)``, reset, step for ``seconds``:
     (seconds to the first reset, the timed steps)."""
@@ -264,6 +265,7 @@ def time_vector_env(
         envs_per_worker=envs_per_worker,
         address=address,
         env_kwargs=env_kwargs,
+        transport=transport,
     )
     try:
         vec.reset(seed=0)
@@ -304,6 +306,7 @@ class BenchReport:
     runs: list[VectorRun] = field(default_factory=list)
     model: StepModel | None = None
     check: VectorRun | None = None
+    transport: str = "socket"  # RayVectorEnv's transport, as measured
 
 
 def run_bench(
@@ -316,10 +319,21 @@ def run_bench(
     target: float = DEFAULT_TARGET,
     check: bool = True,
     log: Any = print,
+    transport: str | None = None,
 ) -> BenchReport:
-    """Measure ``s``, ``a`` and ``b`` for ``env_id`` (module doc); ``log`` gets progress."""
+    """Measure ``s``, ``a`` and ``b`` for ``env_id`` (module doc) with RayVectorEnv's
+    ``transport`` (None: its default); ``log`` gets progress."""
     from chronogym.ray_runtime import cluster_cpus, ensure_ray
     from chronogym.validation import check_bool, check_int, check_number, check_positive
+    from chronogym.vector.ray_vector_env import check_transport
+    from chronogym.vector.shared_step import usable_cpus
+
+    transport = check_transport(transport)
+    if transport == "fork" and address is not None:
+        raise ValueError(
+            f"address={address!r} with transport='fork': forked workers run on this machine "
+            "only; expected no address (or a Ray transport, 'socket' or 'actor')"
+        )
 
     env_kwargs = dict(env_kwargs or {})
     seconds = check_positive("seconds", seconds)
@@ -331,16 +345,20 @@ def run_bench(
     log(f"timing {env_id} serially for {seconds:g} s ...")
     profile = measure_env(env_id, env_kwargs, seconds)
     log(f"  step: {profile.step_s * 1e3:.3f} ms ({profile.steps} steps)")
-    ensure_ray(address)
-    cpus = max(1, int(cluster_cpus()))
+    if transport == "fork":
+        cpus = usable_cpus()
+    else:
+        ensure_ray(address)
+        cpus = max(1, int(cluster_cpus()))
     synthetic = {"step_ms": profile.step_s * 1000, "obs_dim": profile.obs_floats}
     report = BenchReport(
         profile, synthetic_step_s(profile.step_s, min(seconds, 1.0)), cpus, cores or cpus, target
     )
+    report.transport = transport
     for workers in bench_workers(cpus, max_workers):
         log(f"timing RayVectorEnv, {workers} synthetic worker(s), for {seconds:g} s ...")
         start_s, timed = time_vector_env(
-            "chronogym/Synthetic-v0", workers, synthetic, seconds, address
+            "chronogym/Synthetic-v0", workers, synthetic, seconds, address, transport=transport
         )
         report.runs.append(VectorRun("synthetic", workers, 1, profile.step_s, start_s, timed))
     a, b = fit_overhead_nonnegative(
@@ -352,7 +370,9 @@ def run_bench(
     if check:
         workers = min(cpus, max_workers)
         log(f"checking the model on {env_id} itself, {workers} worker(s) ...")
-        start_s, timed = time_vector_env(env_id, workers, env_kwargs, seconds, address)
+        start_s, timed = time_vector_env(
+            env_id, workers, env_kwargs, seconds, address, transport=transport
+        )
         report.check = VectorRun("real", workers, 1, profile.step_s, start_s, timed)
     return report
 
@@ -367,9 +387,11 @@ def format_report(report: BenchReport) -> str:
     ms = 1e3
     lines = [
         f"env {report.env.env_id}: step {report.env.step_s * ms:.3f} ms, "
-        f"observation {report.env.obs_floats} floats; the cluster has {report.cpus} CPUs",
+        f"observation {report.env.obs_floats} floats; "
+        f"{'this machine' if report.transport == 'fork' else 'the cluster'} has {report.cpus} CPUs",
         "",
-        "measured (RayVectorEnv, synthetic env sleeping the env's step, 1 env per worker):",
+        f"measured (RayVectorEnv, transport={report.transport!r}, synthetic env sleeping the "
+        "env's step, 1 env per worker):",
         "  workers  start s  step ms  driver CPU ms/step",
     ]
     for run in report.runs:

@@ -48,7 +48,7 @@ def test_partial_batches_match_sync_per_env(ray_cluster, mode):
     assert ends >= len(fns)  # autoresets are covered
 
 
-@pytest.mark.parametrize("backend", ["socket", "actor"])
+@pytest.mark.parametrize("backend", ["socket", "actor", "fork"])
 def test_batch_mode_returns_exactly_max_envs_and_matches_sync(ray_cluster, backend):
     fns = uneven_fns()
     vec = RayVectorEnv(fns, envs_per_worker=1, transport=backend)

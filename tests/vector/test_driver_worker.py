@@ -15,7 +15,7 @@ from chronogym import RayVectorEnv, SerialVectorEnv
 from chronogym.vector.driver_worker import DriverWorkerBackend
 
 
-@pytest.mark.parametrize("transport", ["socket", "actor"])
+@pytest.mark.parametrize("transport", ["socket", "actor", "fork"])
 @pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
 def test_matches_serial_in_both_autoreset_modes(ray_cluster, mode, transport):
     reference = vector_rollout(SerialVectorEnv(ENV_ID, 5, autoreset_mode=mode), 80)

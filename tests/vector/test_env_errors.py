@@ -29,6 +29,7 @@ BACKENDS = {
     "serial": lambda fns, **kw: SerialVectorEnv(fns, envs_per_worker=1, **kw),
     "socket": lambda fns, **kw: RayVectorEnv(fns, envs_per_worker=1, transport="socket", **kw),
     "actor": lambda fns, **kw: RayVectorEnv(fns, envs_per_worker=1, transport="actor", **kw),
+    "fork": lambda fns, **kw: RayVectorEnv(fns, envs_per_worker=1, transport="fork", **kw),
     "driver_worker": lambda fns, **kw: RayVectorEnv(
         fns, envs_per_worker=1, driver_worker=True, **kw
     ),
@@ -68,7 +69,7 @@ def test_a_step_error_is_raised_in_the_driver_with_its_own_class(ray_cluster, ba
         vec.close()
 
 
-@pytest.mark.parametrize("backend", ["serial", "socket"])
+@pytest.mark.parametrize("backend", ["serial", "socket", "fork"])
 def test_a_wrong_observation_shape_later_in_an_episode_names_the_env(ray_cluster, backend):
     vec = BACKENDS[backend](buggy_fns("shape", at=4, env=2))
     try:
@@ -102,7 +103,7 @@ def test_an_unpicklable_exception_arrives_as_worker_env_error(ray_cluster):
         vec.close()
 
 
-@pytest.mark.parametrize("backend", ["serial", "actor"])
+@pytest.mark.parametrize("backend", ["serial", "actor", "fork"])
 def test_call_and_reset_errors_are_raised_and_a_call_needs_no_reset(ray_cluster, backend):
     vec = BACKENDS[backend](buggy_fns("none"))
     try:
@@ -151,7 +152,7 @@ def test_restart_mode_rebuilds_the_env_and_reports_it_truncated(ray_cluster):
         vec.close()
 
 
-@pytest.mark.parametrize("backend", ["serial", "socket"])
+@pytest.mark.parametrize("backend", ["serial", "socket", "fork"])
 def test_a_reset_crash_loop_ends_at_its_first_repetition_in_restart_mode(ray_cluster, backend):
     vec = BACKENDS[backend](buggy_fns("reset", env=0), env_errors="restart", max_restarts=50)
     try:

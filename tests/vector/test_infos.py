@@ -29,10 +29,12 @@ def reference(style: str, mode: str) -> list:
     return rollout(gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode(mode)))
 
 
+@pytest.mark.parametrize("transport", ["socket", "fork"])
 @pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
 @pytest.mark.parametrize("style", STYLES)
-def test_ray_infos_match_sync_vector_env(ray_cluster, style, mode):
-    vec = RayVectorEnv(info_env_fns(style, NUM_ENVS), envs_per_worker=2, autoreset_mode=mode)
+def test_ray_infos_match_sync_vector_env(ray_cluster, style, mode, transport):
+    fns = info_env_fns(style, NUM_ENVS)
+    vec = RayVectorEnv(fns, envs_per_worker=2, autoreset_mode=mode, transport=transport)
     assert data_equivalence(rollout(vec), reference(style, mode), exact=True)
 
 

@@ -94,11 +94,14 @@ def test_serial_matches_sync(name, mode):
         vec.close()
 
 
+@pytest.mark.parametrize("transport", ["socket", "fork"])
 @pytest.mark.parametrize("mode", MODES, ids=lambda m: m.value)
 @pytest.mark.parametrize("name", list(TESTING_SPACES))
-def test_ray_matches_sync(ray_cluster, name, mode):
+def test_ray_matches_sync(ray_cluster, name, mode, transport):
     space = TESTING_SPACES[name]
-    vec = RayVectorEnv(space_fns(space), envs_per_worker=NUM_ENVS // 2, autoreset_mode=mode)
+    vec = RayVectorEnv(
+        space_fns(space), envs_per_worker=NUM_ENVS // 2, autoreset_mode=mode, transport=transport
+    )
     try:
         actions = actions_for(vec)
         assert_equivalent(rollout(vec, actions, ways=True), sync_rollout(space, mode, actions))

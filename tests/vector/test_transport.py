@@ -52,6 +52,6 @@ def test_killed_worker_is_replaced(ray_cluster, transport, mode):
 
 
 def test_bad_transport_is_a_value_error():
-    expected = r"transport='shm': expected one of \('socket', 'actor'\)"
+    expected = r"transport='shm': expected one of \('socket', 'actor', 'fork'\)"
     with pytest.raises(ValueError, match=expected):
         RayVectorEnv(ENV_ID, 2, transport="shm")

@@ -68,8 +68,10 @@ from chronogym.vector.shared_step import (
 from chronogym.vector.spread_step import SpreadHandlers, SpreadStep, by_node
 from chronogym.vector.wire_format import (
     ANSWER,
+    CALL,
     REQUEST,
     StepFailure,
+    answer_call,
     decode_answer,
     encode_answer,
     fill,
@@ -227,6 +229,9 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
             if size > len(data):
                 data = memoryview(bytearray(size))
             fill(conn, data, 0, size)
+            if kind == CALL:  # a forked worker's other calls (transport="fork")
+                conn.sendall(answer_call(group, data[:size]))
+                continue
             conn.sendall(encode_answer(_step_bytes(group, data[:size], bool(kind))))
     except (OSError, EOFError):
         return
@@ -292,6 +297,10 @@ class SocketBackend(ActorBackend):
         **kwargs: Any,
     ) -> None:
         super().__init__(*args, **kwargs)
+        self._init_sockets(spin_us, shared_memory, relay_tcp)
+
+    def _init_sockets(self, spin_us: float | None, shared_memory: bool, relay_tcp: bool) -> None:
+        """The socket side's state: nothing connected yet."""
         self.spin_us = check_spin_us(spin_us)
         self.shared_memory = shared_memory  # barrier steps through shared memory, if it can
         self.relay_tcp = relay_tcp  # other nodes' relays answer them over TCP, if they can
@@ -313,15 +322,19 @@ class SocketBackend(ActorBackend):
     # -- connections ----------------------------------------------------------------------
     def start(self, group_kwargs: list[dict[str, Any]]) -> None:
         super().start(group_kwargs)
-        self._dir = tempfile.mkdtemp(prefix="chronogym-")
-        os.chmod(self._dir, 0o700)
-        self._socks = [None] * len(self.actors)
-        self._pollers = [None] * len(self.actors)
-        self._spinners = [AdaptiveSpin(self.spin_us * 1e-6) for _ in self.actors]
-        self._recv_spinner = AdaptiveSpin(self.spin_us * 1e-6)
-        self._bufs = [bytearray(4096) for _ in self.actors]
+        self._open_directory(len(self.actors))
         self._relays = Relays(self.spin_us, self.step_timeout, self.start_timeout or 120.0)
         self._connect(list(range(len(self.actors))))
+
+    def _open_directory(self, workers: int) -> None:
+        """The private socket directory, and room for ``workers`` unconnected workers."""
+        self._dir = tempfile.mkdtemp(prefix="chronogym-")
+        os.chmod(self._dir, 0o700)
+        self._socks = [None] * workers
+        self._pollers = [None] * workers
+        self._spinners = [AdaptiveSpin(self.spin_us * 1e-6) for _ in range(workers)]
+        self._recv_spinner = AdaptiveSpin(self.spin_us * 1e-6)
+        self._bufs = [bytearray(4096) for _ in range(workers)]
 
     @property
     def socket_dir(self) -> str | None:
@@ -335,7 +348,7 @@ class SocketBackend(ActorBackend):
     def relayed(self) -> list[bool]:
         """Which workers step through their node's relay (:mod:`chronogym.vector.relay`)."""
         node_of = self._relays.node_of if self._relays is not None else {}
-        return [w in node_of for w in range(len(self.actors))]
+        return [w in node_of for w in range(len(self._socks))]
 
     def _connect(self, workers: list[int]) -> None:
         """Ask ``workers`` to listen (those on this node) and connect to them."""
@@ -402,7 +415,7 @@ class SocketBackend(ActorBackend):
 
     def replace(self, worker: int, kwargs: dict[str, Any]) -> None:
         self._disconnect(worker)
-        super().replace(worker, kwargs)
+        self._replace_process(worker, kwargs)
         self._connect([worker])
         if self._shared is None:
             return
@@ -410,6 +423,10 @@ class SocketBackend(ActorBackend):
             self._close_shared()
         elif not self._attach(worker):
             self._close_shared(f"its replacement worker {worker} could not attach")
+
+    def _replace_process(self, worker: int, kwargs: dict[str, Any]) -> None:
+        """A new process for ``worker``, not yet connected (here: a new Ray actor)."""
+        super().replace(worker, kwargs)
 
     def shutdown(self) -> None:
         for w in range(len(self._socks)):
@@ -506,7 +523,7 @@ class SocketBackend(ActorBackend):
             self.shared_memory = False
             logger.warning("chronogym: no shared-memory step (%s); using sockets", error)
             return False
-        for w in range(len(self.actors)):
+        for w in range(len(self._socks)):
             if not self._attach(w):
                 self._close_shared(f"worker {w} could not attach")
                 return False

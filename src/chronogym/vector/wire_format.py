@@ -11,6 +11,11 @@ and tail) + those parts; the tail is the pickled tuple ``(infos, restarts)`` (or
 ``(infos, restarts, timings)``) when any of them is set, or a pickled
 :class:`StepFailure` (status 1). A request is ``<I B`` (action byte count, timed
 flag) + the action bytes.
+
+Call (``transport="fork"``, whose workers have no Ray actor): any other method of the
+worker's group travels as a request of kind :data:`CALL` whose bytes are the pickled
+``(method, args)``; the answer is ``<Q`` (length) + the pickled
+:class:`~chronogym.vector.backend.Outcome` of the call, as an in-process call gives it.
 """
 
 from __future__ import annotations
@@ -18,13 +23,17 @@ from __future__ import annotations
 import pickle
 import socket
 import struct
+import traceback
 from dataclasses import dataclass
+from typing import Any
 
 from chronogym.vector.backend import Outcome, StepAnswer, error_outcome
 
 REQUEST = struct.Struct("<IB")  # action byte count, timed flag
 ANSWER = struct.Struct("<BIIIII")  # status (0 ok, 1 failure), then 5 part lengths
 OK, FAILED = 0, 1
+CALL = 3  # REQUEST's flag byte: a pickled (method, args) call (ATTACH is 2, steps 0 and 1)
+CALL_ANSWER = struct.Struct("<Q")  # byte count of the pickled Outcome that follows
 
 
 @dataclass
@@ -76,3 +85,29 @@ def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
             raise EOFError(f"the peer closed its socket after {got} of {need} bytes")
         got += n
     return got
+
+
+def answer_call(group: Any, request: bytes) -> bytes:
+    """Run the pickled ``(method, args)`` on ``group``; its Outcome as an answer message.
+    An exception is the Outcome an in-process call gives (:func:`error_outcome`); an answer
+    that cannot be pickled travels as a failure naming why."""
+    method, args = pickle.loads(request)  # trusted: own worker (its driver's private socket)
+    try:
+        outcome = Outcome(True, getattr(group, method)(*args))
+    except Exception as error:
+        outcome = error_outcome(error, traceback.format_exc())
+    try:
+        body = _dumps(outcome)
+    except Exception as error:
+        text = f"{method}'s answer could not be pickled: {type(error).__name__}: {error}"
+        if not outcome.ok:
+            text = f"{outcome.error}\n({text})"
+        body = pickle.dumps(Outcome(False, RuntimeError(text), text))
+    return CALL_ANSWER.pack(len(body)) + body
+
+
+def _dumps(value: Any) -> bytes:
+    """``value`` pickled as Ray pickles a call's answer (cloudpickle: lambdas, local classes)."""
+    import cloudpickle
+
+    return cloudpickle.dumps(value)
