@@ -125,9 +125,9 @@ class RayVectorEnv(WorkerVectorEnv):
             instead of a Ray worker's ~0.7 s (64 workers on 2 cores: ~1.5 s to
             the first reset instead of ~36 s) and carries no Ray threads while
             it steps. Same numbers and fault handling; this machine only, so
-            ``address``, ``num_cpus``, ``num_gpus``, ``scheduling`` and
-            ``worker_niceness`` keep their defaults (a ValueError names one
-            that does not).
+            the Ray arguments (``address``, ``scheduling``, ``worker_niceness``,
+            and the CPUs and GPUs per worker) keep their defaults (a
+            ValueError names one that does not).
         spin_us: ``transport="socket"`` or ``"fork"`` only: µs each end of a socket spins
             (polling, yielding its core to other processes) before it blocks
             on a read; an answer caught while spinning saves the wake-up of
