@@ -1,4 +1,5 @@
-"""RayVectorEnv: a Gymnasium vector env whose simulations live in Ray actors."""
+"""RayVectorEnv: a Gymnasium vector env whose simulations live in Ray actors (or, with
+``transport="fork"``, in processes forked on this machine)."""
 
 from __future__ import annotations
 
@@ -122,9 +123,9 @@ class RayVectorEnv(WorkerVectorEnv):
             forked on this machine from one warm process that imported the
             envs' modules once (:mod:`chronogym.vector.fork_transport`), and
             every call goes over its socket. A worker starts in ~15 ms of CPU
-            instead of a Ray worker's ~0.7 s (64 workers on 2 cores: ~1.5 s to
-            the first reset instead of ~36 s) and carries no Ray threads while
-            it steps. Same numbers and fault handling; this machine only, so
+            instead of a Ray worker's ~0.7 s (64 MuJoCo cart-poles on 2 cores:
+            7 s to the first reset instead of 57-60 s) and carries no Ray
+            threads while it steps. Same numbers and fault handling; this machine only, so
             the Ray arguments (``address``, ``scheduling``, ``worker_niceness``,
             and the CPUs and GPUs per worker) keep their defaults (a
             ValueError names one that does not).
