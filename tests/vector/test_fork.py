@@ -145,6 +145,28 @@ def test_a_worker_that_cannot_start_is_a_clear_error():
         RayVectorEnv(fns, envs_per_worker=1, transport="fork")
 
 
+def test_the_zygote_preloads_the_modules_the_factories_import():
+    from chronogym import SimEnv
+    from chronogym.tasks.cartpole.mujoco import CartPoleTask
+    from chronogym.vector.fork_transport import preload_modules
+
+    fns = [
+        ENV_ID,
+        partial(gym.make, "chronogym/Go1Velocity-v0", k=2),
+        partial(SimEnv, CartPoleTask()),
+        lambda: gym.make(ENV_ID),  # defined here: nothing to name
+    ]
+    modules = preload_modules(fns)
+    for name in (
+        "chronogym.registration",  # the ids' entry point
+        "chronogym.tasks.cartpole.mujoco",  # the task an id names, and a task object's class
+        "chronogym.tasks.quadruped.task",  # the task of the id a partial makes
+        "chronogym.env",  # a partial's function
+    ):
+        assert name in modules, modules
+    assert len(modules) == len(set(modules)) and "__main__" not in modules
+
+
 @pytest.mark.parametrize(
     ("name", "value"),
     [

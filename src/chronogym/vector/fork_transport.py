@@ -18,8 +18,10 @@ its envs reported truncated, as with Ray's workers.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import pickle
+import re
 import signal
 import socket
 import time
@@ -43,6 +45,7 @@ from chronogym.vector.socket_transport import (
 )
 from chronogym.vector.wire_format import CALL, CALL_ANSWER, REQUEST, fill
 
+ENTRY = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")  # "module:attr", as an entry point
 DIAL_PAUSE_S = 1e-3  # between tries to connect to a worker that is still starting
 START_TIMEOUT_S = 120.0  # start_timeout=None: still give up on a worker that never listens
 
@@ -73,30 +76,40 @@ def serve_forked(payload: bytes, path: str, spin_s: float) -> None:
     listener.bind(path)  # first, so that the driver can connect while the envs build
     listener.listen(1)
     listener.settimeout(ACCEPT_TIMEOUT_S)
-    group = ActorGroup(**pickle.loads(payload))  # trusted: own driver (a private socket)
+    group = ActorGroup(**pickle.loads(payload))  # trusted: own driver (its zygote's line)
     _serve(group, listener, path, spin_s)
 
 
 def preload_modules(env_fns: list[Any]) -> list[str]:
-    """The modules of the envs' entry points and factories, for the zygote to import once."""
+    """The modules the envs' factories will import, for the zygote to import once: an id's
+    entry point, a factory's module, and for a ``functools.partial`` those of its function,
+    of the id it makes and of its arguments' types (a task object's class)."""
     names: list[str] = []
     for fn in env_fns:
-        target: Any = fn
-        if isinstance(fn, str):
-            with contextlib.suppress(Exception):
-                import gymnasium as gym
+        names += _modules_of(fn)
+        if isinstance(fn, functools.partial):
+            names += _modules_of(fn.func)
+            for arg in [*fn.args, *fn.keywords.values()]:
+                names += _modules_of(arg if isinstance(arg, (str, EnvSpec)) else type(arg))
+    return [n for n in dict.fromkeys(names) if n not in ("__main__", "builtins")]
 
-                target = gym.spec(fn)
-        if isinstance(target, EnvSpec):
-            target = target.entry_point
-        if isinstance(target, str):
-            names.append(target.split(":")[0])
-            continue
-        target = getattr(target, "func", target)  # functools.partial
-        module = getattr(target, "__module__", None)
-        if module and module != "__main__":
-            names.append(module)
-    return list(dict.fromkeys(names))
+
+def _modules_of(target: Any) -> list[str]:
+    """The module behind an id, a spec, an entry point or a callable (none if unknown)."""
+    if isinstance(target, str) and not ENTRY.match(target):
+        try:
+            import gymnasium as gym
+
+            target = gym.spec(target)
+        except Exception:  # not an id (any other string argument)
+            return []
+    if isinstance(target, EnvSpec):  # its entry point, and a task it names ("module:Class")
+        named = [v for v in target.kwargs.values() if isinstance(v, str) and ENTRY.match(v)]
+        return [*_modules_of(target.entry_point), *(v.split(":")[0] for v in named)]
+    if isinstance(target, str):
+        return [target.split(":")[0]]
+    module = getattr(target, "__module__", None)
+    return [module] if isinstance(module, str) else []
 
 
 @dataclass
@@ -185,7 +198,8 @@ class ForkBackend(SocketBackend):
         for w, outcome in zip(workers, outcomes, strict=True):
             if not outcome.ok:
                 raise RuntimeError(
-                    f"forked worker {w} failed while building its envs:\n{outcome.error}"
+                    f"forked worker {w} failed while building its envs "
+                    f"(start_timeout={self.start_timeout} s):\n{outcome.error}"
                 )
         for w in workers:
             self._socks[w].settimeout(self.step_timeout)  # type: ignore[union-attr]

@@ -44,7 +44,7 @@ def send(line: socket.socket, message: Any) -> None:
 def receive(line: socket.socket) -> Any:
     """One message; EOFError when the other end closed the line."""
     (size,) = LENGTH.unpack(_exactly(line, LENGTH.size))
-    return pickle.loads(_exactly(line, size))  # trusted: the driver and its own zygote
+    return pickle.loads(_exactly(line, size))  # trusted: own driver, or its zygote
 
 
 def _exactly(line: socket.socket, size: int) -> bytes:

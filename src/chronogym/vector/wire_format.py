@@ -91,7 +91,7 @@ def answer_call(group: Any, request: bytes) -> bytes:
     """Run the pickled ``(method, args)`` on ``group``; its Outcome as an answer message.
     An exception is the Outcome an in-process call gives (:func:`error_outcome`); an answer
     that cannot be pickled travels as a failure naming why."""
-    method, args = pickle.loads(request)  # trusted: own worker (its driver's private socket)
+    method, args = pickle.loads(request)  # trusted: own driver (its private socket)
     try:
         outcome = Outcome(True, getattr(group, method)(*args))
     except Exception as error:
