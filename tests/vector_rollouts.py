@@ -155,3 +155,12 @@ def kill_at(pid: int, step: int):
             time.sleep(0.3)
 
     return kill
+
+
+def kill_and_step(vec, pid: int, actions: np.ndarray, sig: int = signal.SIGKILL) -> tuple:
+    """Send ``sig`` to worker process ``pid``, let it die, then one ``step``: its
+    (truncations, infos)."""
+    os.kill(pid, sig)
+    time.sleep(0.3)
+    _, _, _, truncated, info = vec.step(actions)
+    return truncated, info

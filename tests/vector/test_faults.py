@@ -10,7 +10,7 @@ from functools import partial
 import numpy as np
 import pytest
 from faulty_tasks import FailingEnv
-from vector_rollouts import ENV_ID, vector_rollout
+from vector_rollouts import ENV_ID, kill_and_step, vector_rollout
 
 from chronogym import RayVectorEnv, SerialVectorEnv, WorkerCrashLoopError
 
@@ -66,9 +66,7 @@ def test_a_segfaulted_worker_is_replaced_and_the_signal_named(ray_cluster, trans
         vec.reset(seed=0)
         actions = np.zeros((2, 1), dtype=np.float32)
         vec.step(actions)
-        os.kill(vec.worker_pids()[1], signal.SIGSEGV)
-        time.sleep(0.3)
-        _, _, _, truncated, info = vec.step(actions)
+        truncated, info = kill_and_step(vec, vec.worker_pids()[1], actions, signal.SIGSEGV)
         assert truncated.tolist() == [False, True]
         assert "died of SIGSEGV, as its Ray log records" in info["worker_error"][1]
         vec.step(actions)  # the run goes on

@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import data_equivalence
-from vector_rollouts import ENV_ID, synthetic_rollout, vector_rollout
+from vector_rollouts import ENV_ID, kill_and_step, synthetic_rollout, vector_rollout
 
 from chronogym import RayVectorEnv, SerialVectorEnv
 
@@ -123,6 +123,28 @@ def test_a_hung_worker_is_killed_and_replaced_after_step_timeout():
         assert not truncated.any()
         time.sleep(0.2)
         assert not alive(hung) and vec.worker_pids()[0] != hung
+    finally:
+        vec.close()
+
+
+def test_a_dead_zygote_is_replaced_when_a_worker_needs_forking():
+    vec = fork_vec(num_envs=2, envs_per_worker=1)
+    try:
+        vec.reset(seed=0)
+        actions = np.zeros((2, 1), dtype=np.float32)
+        old_zygote = vec._backend._zygote.pid
+        os.kill(old_zygote, signal.SIGKILL)  # its workers live on, orphaned
+        vec.step(actions)
+        truncated, info = kill_and_step(vec, vec.worker_pids()[1], actions)
+        assert truncated.tolist() == [False, True]
+        assert "the worker process (pid" in info["worker_error"][1]
+        assert vec._backend._zygote.pid != old_zygote and alive(vec.worker_pids()[1])
+        start = time.perf_counter()  # worker 0 is an orphan of the dead zygote
+        truncated, info = kill_and_step(vec, vec.worker_pids()[0], actions)
+        assert truncated.tolist() == [True, False] and time.perf_counter() - start < 5
+        assert "an earlier zygote, is gone" in info["worker_error"][0]
+        _, _, _, truncated, _ = vec.step(actions)  # the replacement steps
+        assert not truncated.any()
     finally:
         vec.close()
 

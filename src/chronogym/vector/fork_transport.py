@@ -112,6 +112,15 @@ def _modules_of(target: Any) -> list[str]:
     return [module] if isinstance(module, str) else []
 
 
+def _running(pid: int) -> bool:
+    """Is process ``pid`` alive (a zombie, ended but not yet reaped, is not)?"""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:  # gone (or no /proc: then assume alive, the milder message)
+        return not os.path.isdir("/proc") or os.path.exists(f"/proc/{pid}")
+
+
 @dataclass
 class CallHandle(SockHandle):
     """A call other than the packed step, sent over a forked worker's socket."""
@@ -159,7 +168,12 @@ class ForkBackend(SocketBackend):
         self._opened += 1
         self._paths[w] = os.path.join(self._dir, f"w{w}-{self._opened}.sock")
         payload = cloudpickle.dumps(kwargs)
-        self._pids[w] = self._zygote.fork(payload, self._paths[w], self.spin_us * 1e-6)
+        try:
+            self._pids[w] = self._zygote.fork(payload, self._paths[w], self.spin_us * 1e-6)
+        except (OSError, EOFError):  # the zygote died (its workers live on): a new one
+            self._zygote.close()
+            self._zygote = Zygote(self._modules, self.start_timeout)
+            self._pids[w] = self._zygote.fork(payload, self._paths[w], self.spin_us * 1e-6)
 
     def _replace_process(self, worker: int, kwargs: dict[str, Any]) -> None:
         self._kill(worker)
@@ -235,9 +249,11 @@ class ForkBackend(SocketBackend):
         if self._zygote is not None and pid is not None:
             with contextlib.suppress(OSError, EOFError):
                 ended = self._zygote.ending(pid, DEATH_PROBE_S)
-        if ended is None:
-            return f"the worker process (pid {pid}) is alive but closed its socket"
-        return f"the worker process (pid {pid}) {ended}"
+        if ended is not None:
+            return f"the worker process (pid {pid}) {ended}"
+        if pid is not None and not _running(pid):
+            return f"the worker process (pid {pid}) ended; its parent, an earlier zygote, is gone"
+        return f"the worker process (pid {pid}) is alive but closed its socket"
 
     # -- calls ----------------------------------------------------------------------------
     def submit(self, worker: int, method: str, *args: Any) -> Any:

@@ -181,6 +181,8 @@ def _reap(ended: dict[int, str | None]) -> None:
 
 
 def _wait_for(ended: dict[int, str | None], pid: int, wait_s: float) -> str | None:
+    if pid not in ended:  # not a child of this zygote (an earlier one forked it)
+        return None
     deadline = time.monotonic() + wait_s
     while ended.get(pid) is None and time.monotonic() < deadline:
         time.sleep(0.005)
