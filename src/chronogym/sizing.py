@@ -325,15 +325,13 @@ def run_bench(
     ``transport`` (None: its default); ``log`` gets progress."""
     from chronogym.ray_runtime import cluster_cpus, ensure_ray
     from chronogym.validation import check_bool, check_int, check_number, check_positive
+    from chronogym.vector.fork_transport import check_fork_arguments
     from chronogym.vector.ray_vector_env import check_transport
     from chronogym.vector.shared_step import usable_cpus
 
     transport = check_transport(transport)
-    if transport == "fork" and address is not None:
-        raise ValueError(
-            f"address={address!r} with transport='fork': forked workers run on this machine "
-            "only; expected no address (or a Ray transport, 'socket' or 'actor')"
-        )
+    if transport == "fork":  # before the serial timing, not at the first vector env
+        check_fork_arguments(address=address)
 
     env_kwargs = dict(env_kwargs or {})
     seconds = check_positive("seconds", seconds)
