@@ -50,7 +50,11 @@ Paths, side by side (the same W, envs per worker and step cost, one after anothe
   (the default before the TCP lines);
 - ``multinode_messages``: the same with ``shared_memory=False``: the relay sends each
   worker its message and returns every answer, which the driver decodes one by one (the
-  default before the per-node shared step). ``--multinode-only`` runs just these three.
+  default before the per-node shared step);
+- ``multinode_fork``: ``RayVectorEnv(transport="fork", address=...)`` on the same cluster:
+  the workers spread over the nodes by their CPUs, each forked by its node's relay
+  (:mod:`chronogym.vector.fork_transport`), not Ray actors; steps as ``multinode``.
+  ``--multinode-only`` runs just the multi-node paths (``--multinode-paths`` chooses).
 
 Method. One local Ray for the local paths (``ray.init(num_cpus=--ray-cpus)``, default the
 machine's CPUs; RayVectorEnv shares them as fractional ``num_cpus`` per worker, so 64
@@ -77,7 +81,8 @@ with ``b_thread``. The multi-node paths
 make one Ray call per node in use, so W = 1 ... ``--nodes`` also add calls: their fits add
 ``b_cpu`` over W >= ``--nodes`` and its "cores" predictions (:func:`fits`).
 
-Stragglers (W = ``--straggler-workers``, 10 ms, lognormal CV 0, 0.25, 0.5, socket path):
+Stragglers (W = ``--straggler-workers``, 10 ms, lognormal CV 0, 0.25, 0.5, on each of
+``--straggler-paths``, default the socket path):
 the barrier's env-steps/s; ``recv(min_envs=num_envs // 2)`` with every env kept in flight
 (each recv returns the workers that answered, at least half the envs, sent again at once);
 and EnvPool's batch mode, ``recv(min_envs=k, max_envs=k)`` with ``k = num_envs // 2``:
@@ -147,11 +152,12 @@ LOCAL_PATHS = (
     "fork",
     "async",
 )
-MULTINODE_PATHS = ("multinode", "multinode_calls", "multinode_messages")
+MULTINODE_PATHS = ("multinode", "multinode_calls", "multinode_messages", "multinode_fork")
 ALL_PATHS = (*LOCAL_PATHS, *MULTINODE_PATHS)
 PREDICT_AT = (64, 256)
 STRAGGLER_CVS = (0.0, 0.25, 0.5)
 STRAGGLER_STEP_MS = 10.0
+STRAGGLER_PATHS = ("socket", "fork")  # transports --straggler-paths may name
 RAY_SETTLE_S = 2.0
 
 
@@ -171,6 +177,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--multinode-only", action="store_true", help="only the multi-node paths (no stragglers)"
     )
+    parser.add_argument(
+        "--multinode-paths",
+        nargs="+",
+        choices=MULTINODE_PATHS,
+        default=list(MULTINODE_PATHS),
+        help="the multi-node paths to run (default all)",
+    )
     parser.add_argument("--nodes", type=positive_int, default=2, help="worker nodes of it")
     parser.add_argument("--seconds", type=positive_float, default=2.0, help="timed per setting")
     parser.add_argument("--min-steps", type=positive_int, default=20, help="timed, at least")
@@ -178,6 +191,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--obs-dim", type=positive_int, default=16)
     parser.add_argument("--info-floats", type=non_negative_int, default=0)
     parser.add_argument("--straggler-workers", type=positive_int, default=16)
+    parser.add_argument(
+        "--straggler-paths",
+        nargs="+",
+        choices=STRAGGLER_PATHS,
+        default=["socket"],
+        help="the transports the straggler runs compare (default socket)",
+    )
     parser.add_argument("--no-stragglers", action="store_true")
     parser.add_argument(
         "--ray-cpus", type=positive_int, default=os.cpu_count() or 1, help="ray.init num_cpus"
@@ -258,6 +278,8 @@ def build(path: str, workers: int, epw: int, kwargs: dict[str, Any], address: st
         options["shared_memory"] = False
     elif path == "driver_worker":
         options["driver_worker"] = True
+    elif path == "multinode_fork":
+        options.update(address=address, transport="fork")
     elif path in MULTINODE_PATHS:
         options.update(address=address, scheduling="spread")
         if path == "multinode_calls":
@@ -472,13 +494,25 @@ def sweep(
 
 def stragglers(args: argparse.Namespace) -> list[dict[str, Any]]:
     """Barrier vs recv(min_envs) (and the exact batch slot) under lognormal step costs."""
+    rows = []
+    for path in getattr(args, "straggler_paths", ["socket"]):
+        rows += stragglers_of(path, args)
+    return rows
+
+
+def stragglers_of(path: str, args: argparse.Namespace) -> list[dict[str, Any]]:
+    """:func:`stragglers` on one transport (``path``: ``socket`` or ``fork``)."""
     from chronogym import RayVectorEnv
 
     workers = args.straggler_workers
     batch = max(1, workers // 2)
     rows = []
     vec = RayVectorEnv(
-        ENV_ID, workers, envs_per_worker=1, env_kwargs=env_kwargs(args, STRAGGLER_STEP_MS)
+        ENV_ID,
+        workers,
+        envs_per_worker=1,
+        env_kwargs=env_kwargs(args, STRAGGLER_STEP_MS),
+        transport=path,
     )
     try:
         vec.reset(seed=0)
@@ -489,7 +523,7 @@ def stragglers(args: argparse.Namespace) -> list[dict[str, Any]]:
             done, seconds = run_recv_min_envs(vec, args.seconds, batch)
             exact = run_exact_batch(vec, args.seconds, batch)
             row = {
-                "path": "socket",
+                "path": path,
                 "workers": workers,
                 "step_ms": STRAGGLER_STEP_MS,
                 "cv": cv,
@@ -510,7 +544,7 @@ def stragglers(args: argparse.Namespace) -> list[dict[str, Any]]:
                 else ""
             )
             print(
-                f"  CV {cv:g}: barrier {barrier:,.0f}, recv(min_envs={batch}) "
+                f"  {path}, CV {cv:g}: barrier {barrier:,.0f}, recv(min_envs={batch}) "
                 f"{row['recv_min_envs_env_steps_per_s']:,.0f}{exact_text} env-steps/s",
                 flush=True,
             )
@@ -711,6 +745,7 @@ START_COLUMNS = (
     Column("worker RSS MB", 13, "{:.0f}", key="worker_rss_mb_mean"),
 )
 STRAGGLER_COLUMNS = (
+    Column("path", 6, align="<", key="path"),
     Column("CV", 4, "{:g}", key="cv"),
     Column("W", 3, key="workers"),
     Column("barrier env-steps/s", 19, "{:,.0f}", key="barrier_env_steps_per_s"),
@@ -824,8 +859,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"multinode: {args.nodes} worker nodes of {args.ray_cpus} CPUs, head without")
         try:
             with multinode_cluster(args.nodes, args.ray_cpus) as address:
-                prime(list(MULTINODE_PATHS), args, address)
-                sweep(list(MULTINODE_PATHS), args, address, runs, starts, failures)
+                prime(args.multinode_paths, args, address)
+                sweep(args.multinode_paths, args, address, runs, starts, failures)
         except Exception as error:
             failures.append({"setting": "multinode cluster", "error": error_text(error)})
             print(f"  multinode failed: {error_text(error)}")

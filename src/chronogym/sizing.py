@@ -307,6 +307,7 @@ class BenchReport:
     model: StepModel | None = None
     check: VectorRun | None = None
     transport: str = "socket"  # RayVectorEnv's transport, as measured
+    where: str = "the cluster"  # whose CPUs: "this machine" for forked workers without Ray
 
 
 def run_bench(
@@ -325,14 +326,11 @@ def run_bench(
     ``transport`` (None: its default); ``log`` gets progress."""
     from chronogym.ray_runtime import cluster_cpus, ensure_ray
     from chronogym.validation import check_bool, check_int, check_number, check_positive
-    from chronogym.vector.fork_transport import check_fork_arguments
+    from chronogym.vector.fork_transport import forks_here_only
     from chronogym.vector.ray_vector_env import check_transport
     from chronogym.vector.shared_step import usable_cpus
 
     transport = check_transport(transport)
-    if transport == "fork":  # before the serial timing, not at the first vector env
-        check_fork_arguments(address=address)
-
     env_kwargs = dict(env_kwargs or {})
     seconds = check_positive("seconds", seconds)
     check_int("max_workers", max_workers, low=1)
@@ -343,7 +341,8 @@ def run_bench(
     log(f"timing {env_id} serially for {seconds:g} s ...")
     profile = measure_env(env_id, env_kwargs, seconds)
     log(f"  step: {profile.step_s * 1e3:.3f} ms ({profile.steps} steps)")
-    if transport == "fork":
+    here_only = transport == "fork" and forks_here_only(address)  # forked here, without Ray
+    if here_only:
         cpus = usable_cpus()
     else:
         ensure_ray(address)
@@ -353,6 +352,7 @@ def run_bench(
         profile, synthetic_step_s(profile.step_s, min(seconds, 1.0)), cpus, cores or cpus, target
     )
     report.transport = transport
+    report.where = "this machine" if here_only else "the cluster"
     for workers in bench_workers(cpus, max_workers):
         log(f"timing RayVectorEnv, {workers} synthetic worker(s), for {seconds:g} s ...")
         start_s, timed = time_vector_env(
@@ -386,7 +386,7 @@ def format_report(report: BenchReport) -> str:
     lines = [
         f"env {report.env.env_id}: step {report.env.step_s * ms:.3f} ms, "
         f"observation {report.env.obs_floats} floats; "
-        f"{'this machine' if report.transport == 'fork' else 'the cluster'} has {report.cpus} CPUs",
+        f"{report.where} has {report.cpus} CPUs",
         "",
         f"measured (RayVectorEnv, transport={report.transport!r}, synthetic env sleeping the "
         "env's step, 1 env per worker):",

@@ -274,6 +274,116 @@ def test_a_spread_step_falls_back_where_it_cannot_open(cluster, monkeypatch, fai
             np.testing.assert_array_equal(a, b)
 
 
+def test_forked_workers_spread_over_the_nodes_match_serial(cluster):
+    """transport="fork" with an address: the workers spread over the 3 nodes by their CPUs
+    (2 each), those of other nodes forked by their node's relay; no Ray actor per worker;
+    steps, resets and calls through the relays; the same numbers as serial."""
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+    from chronogym.vector.serial import SerialVectorEnv
+
+    vec = RayVectorEnv(GO1, 6, envs_per_worker=1, transport="fork", address=cluster.address)
+    try:
+        nodes = [cluster.node_of_pid(pid) for pid in vec.worker_pids()]
+        # the driver's node: forked by the driver's zygote (no Ray process is their parent)
+        assert nodes[:2] == [None, None] and nodes[2] == nodes[3] and nodes[4] == nodes[5]
+        assert sorted(nodes[2:]) == ["node_1", "node_1", "node_2", "node_2"]  # in blocks
+        assert [vec._backend.node(w) is None for w in range(6)] == [True] * 2 + [False] * 4
+        assert vec._backend.actors == []
+        assert vec._backend.connected() == [node is None for node in nodes]
+        assert vec._backend.relayed() == [node is not None for node in nodes]
+        distributed = go1_rollout(vec, steps=40)
+        assert spread_steps(vec) == 40 and tcp_lines(vec) == 2
+        assert vec.get_attr("spec")[4].id == GO1  # a call through node_2's relay
+        vec.set_attr("marker", list(range(6)))
+        assert list(vec.get_attr("marker")) == list(range(6))
+    finally:
+        vec.close()
+    serial = SerialVectorEnv(GO1, 6)
+    try:
+        reference = go1_rollout(serial, steps=40)
+    finally:
+        serial.close()
+    for got, want in zip(distributed, reference, strict=True):
+        assert got.dtype == want.dtype
+        assert got.tobytes() == want.tobytes()
+
+
+def test_forked_workers_elsewhere_are_replaced_after_a_kill_a_hang_and_a_lost_relay(cluster):
+    import os
+    import signal
+    import time
+
+    import ray
+
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+
+    vec = RayVectorEnv(
+        SYNTHETIC,
+        3,
+        envs_per_worker=1,
+        transport="fork",
+        address=cluster.address,
+        step_timeout=2.0,
+        env_kwargs={"step_ms": 1.0},
+    )
+    actions = np.zeros((3, 2), dtype=np.float32)
+    try:
+        backend = vec._backend
+        assert backend.relayed() == [False, True, True]
+        vec.reset(seed=0)
+        vec.step(actions)
+        node_1 = cluster.node_of_pid(vec.worker_pids()[1])
+        os.kill(vec.worker_pids()[1], signal.SIGKILL)  # a forked worker on another node
+        time.sleep(0.3)
+        _, _, _, truncated, info = vec.step(actions)
+        assert truncated.tolist() == [False, True, False]
+        assert f"on node {backend.node(1)}) was killed by SIGKILL" in info["worker_error"][1]
+        _, _, _, truncated, _ = vec.step(actions)  # its replacement, forked there again
+        assert not truncated.any() and backend.relayed() == [False, True, True]
+        assert cluster.node_of_pid(vec.worker_pids()[1]) == node_1
+        assert "(worker 1's socket on its node failed: EOFError" in info["worker_error"][1]
+
+        vec.set_attr("step_ms", [1.0, 1.0, 60_000.0])  # worker 2 hangs past step_timeout
+        start = time.perf_counter()
+        _, _, _, truncated, info = vec.step(actions)
+        assert time.perf_counter() - start < 20
+        assert truncated.tolist() == [False, False, True]
+        assert "step_timeout=2.0" in info["worker_error"][2]
+        _, _, _, truncated, _ = vec.step(actions)  # replaced (its step_ms: the default)
+        assert not truncated.any()
+
+        relay = backend._relays.by_node[backend.node(2)]
+        relay_pid = ray.get(relay.pid.remote(), timeout=10)
+        ray.kill(relay)
+        with pytest.raises(ProcessLookupError):  # wait until its process (its line) is gone
+            for _ in range(100):
+                os.kill(relay_pid, 0)
+                time.sleep(0.1)
+        _, _, _, truncated, info = vec.step(actions)
+        assert truncated.tolist() == [False, False, True]
+        assert "failed" in info["worker_error"][2]
+        vec.step(actions)
+        _, _, _, truncated, _ = vec.step(actions)  # forked by a new relay on its node
+        assert not truncated.any() and backend.relayed() == [False, True, True]
+    finally:
+        vec.close()
+    assert vec._backend._relays is None
+
+
+def test_a_forked_worker_that_dies_building_on_another_node_is_a_clear_error(cluster):
+    import os
+    from functools import partial
+
+    import gymnasium as gym
+
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+
+    fns = [partial(gym.make, SYNTHETIC), partial(gym.make, SYNTHETIC), lambda: os._exit(5)]
+    pattern = r"(?s)forked worker 2 on node \w+ failed while building.*exited with code 5"
+    with pytest.raises(RuntimeError, match=pattern):
+        RayVectorEnv(fns, envs_per_worker=1, transport="fork", address=cluster.address)
+
+
 def test_workers_group_by_node_with_their_rows():
     from chronogym.vector.spread_step import HERE, by_node
 

@@ -192,7 +192,6 @@ def test_the_zygote_preloads_the_modules_the_factories_import():
 @pytest.mark.parametrize(
     ("name", "value"),
     [
-        ("address", "127.0.0.1:6379"),
         ("num_gpus", 1),
         ("num_cpus", 1),
         ("scheduling", "spread"),
@@ -202,3 +201,14 @@ def test_the_zygote_preloads_the_modules_the_factories_import():
 def test_ray_arguments_are_rejected_by_name(name, value):
     with pytest.raises(ValueError, match=rf"{name}=.*transport='fork'.*expected {name}="):
         fork_vec(**{name: value})
+
+
+def test_workers_spread_over_nodes_by_their_cpus():
+    from chronogym.vector.fork_transport import spread_by_cpus
+
+    assert spread_by_cpus(6, {"a": 1, "b": 1, "c": 1}) == ["a", "a", "b", "b", "c", "c"]
+    assert spread_by_cpus(5, {"a": 1, "b": 2, "c": 2}) == ["a", "b", "b", "c", "c"]
+    assert spread_by_cpus(4, {"a": 1, "b": 2}) == ["a", "b", "b", "b"]  # 1.33 / 2.67
+    assert spread_by_cpus(2, {"a": 4, "b": 4, "c": 4}) == ["a", "b"]  # ties: in order
+    with pytest.raises(ValueError, match="cannot spread 2 workers over nodes with CPUs"):
+        spread_by_cpus(2, {})

@@ -9,10 +9,18 @@ Unix socket in the driver's private directory exactly as a socket-transport work
 (:data:`~chronogym.vector.wire_format.CALL`). Everything the driver does with the answers
 is the socket transport's, so the numbers are the same.
 
-Workers live on the driver's machine only, and no Ray cluster is started. A worker that
-dies is seen as the end of its socket, and the zygote, its parent, names its signal or exit
-code; a worker that stops answering for ``step_timeout`` is killed. Either is replaced and
-its envs reported truncated, as with Ray's workers.
+Without an ``address``, workers live on the driver's machine, and no Ray cluster is started
+(Ray is not even imported). With one, the workers are spread over the cluster's live nodes
+in proportion to their CPUs (:func:`spread_by_cpus`), in blocks of consecutive workers: those
+of the driver's node forked here, those of every other node by that node's relay, from a
+zygote of its own there (:meth:`~chronogym.vector.relay.NodeRelay.fork`), their steps and
+calls batched into one relay call per node, and their barrier steps through a shared block per
+node (:mod:`chronogym.vector.spread_step`), as the socket transport's relayed workers.
+
+A worker that dies is seen as the end of its socket, and the zygote, its parent, names its
+signal or exit code; a worker that stops answering for ``step_timeout`` is killed. Either is
+replaced and its envs reported truncated, as with Ray's workers; one whose node is gone is
+forked again on the live node with the most CPUs per worker.
 """
 
 from __future__ import annotations
@@ -33,10 +41,13 @@ from gymnasium.envs.registration import EnvSpec
 from chronogym.ray_runtime import WORKER_NICENESS
 from chronogym.vector.actor_transport import ActorGroup
 from chronogym.vector.backend import Outcome
-from chronogym.vector.fork_zygote import Zygote
+from chronogym.vector.fork_zygote import Zygote, fork_worker, running
+from chronogym.vector.relay import Relays
+from chronogym.vector.relay_channel import ANSWERED
 from chronogym.vector.socket_transport import (
     ACCEPT_TIMEOUT_S,
     DEATH_PROBE_S,
+    RELAY_MARGIN_S,
     STEP_METHOD,
     SocketBackend,
     SockHandle,
@@ -46,26 +57,60 @@ from chronogym.vector.socket_transport import (
 from chronogym.vector.wire_format import CALL, CALL_ANSWER, REQUEST, fill
 
 ENTRY = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")  # "module:attr", as an entry point
-DIAL_PAUSE_S = 1e-3  # between tries to connect to a worker that is still starting
 START_TIMEOUT_S = 120.0  # start_timeout=None: still give up on a worker that never listens
 
 
 def check_fork_arguments(**given: Any) -> None:
     """Reject the Ray arguments that mean nothing to forked workers, by name."""
-    meaningless = {
+    ray_only = {
         "num_cpus": None,
         "num_gpus": 0,
-        "address": None,
         "worker_niceness": WORKER_NICENESS,
         "scheduling": "default",
     }
     for name, value in given.items():
-        if value != meaningless[name]:
+        if name in ray_only and value != ray_only[name]:
             raise ValueError(
-                f"{name}={value!r} with transport='fork': forked workers run on this machine, "
-                "outside Ray, at the driver's priority; expected "
-                f"{name}={meaningless[name]!r} (or a Ray transport, 'socket' or 'actor')"
+                f"{name}={value!r} with transport='fork': forked workers are not Ray actors "
+                "(nothing is reserved for them; they run at the driver's priority, spread over "
+                "the nodes by their CPUs); expected "
+                f"{name}={ray_only[name]!r} (or a Ray transport, 'socket' or 'actor')"
             )
+
+
+def forks_here_only(address: str | None) -> bool:
+    """Will ``transport="fork"`` keep every worker on this machine, without Ray? Yes unless
+    a cluster is named (``address``, else ``RAY_ADDRESS``)."""
+    return not (address or os.environ.get("RAY_ADDRESS"))
+
+
+def spread_by_cpus(workers: int, cpus: dict[str, float]) -> list[str]:
+    """Each worker's node: ``workers`` spread over the nodes of ``cpus`` (node -> CPUs) in
+    proportion to their CPUs (largest remainders first, ties in ``cpus``' order), in
+    blocks of consecutive workers, in ``cpus``' order."""
+    total = sum(cpus.values())
+    if workers < 1 or total <= 0:
+        raise ValueError(f"cannot spread {workers} workers over nodes with CPUs {cpus}")
+    shares = {node: workers * n / total for node, n in cpus.items()}
+    counts = {node: int(share) for node, share in shares.items()}
+    by_remainder = sorted(cpus, key=lambda node: counts[node] - shares[node])  # stable
+    for node in by_remainder[: workers - sum(counts.values())]:
+        counts[node] += 1
+    return [node for node in cpus for _ in range(counts[node])]
+
+
+def cluster_nodes() -> dict[str, float]:
+    """The live nodes of the connected Ray cluster that offer CPUs (node id -> CPUs), the
+    driver's own first."""
+    import ray
+
+    here = ray.get_runtime_context().get_node_id()
+    nodes = {
+        node["NodeID"]: float(node["Resources"].get("CPU", 0.0))
+        for node in ray.nodes()
+        if node["Alive"] and node["Resources"].get("CPU", 0.0) > 0
+    }
+    return dict(sorted(nodes.items(), key=lambda item: item[0] != here))
 
 
 def serve_forked(payload: bytes, path: str, spin_s: float) -> None:
@@ -112,22 +157,14 @@ def _modules_of(target: Any) -> list[str]:
     return [module] if isinstance(module, str) else []
 
 
-def _running(pid: int) -> bool:
-    """Is process ``pid`` alive (a zombie, ended but not yet reaped, is not)?"""
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:  # gone (or no /proc: then assume alive, the milder message)
-        return not os.path.isdir("/proc") or os.path.exists(f"/proc/{pid}")
-
-
 @dataclass
 class CallHandle(SockHandle):
     """A call other than the packed step, sent over a forked worker's socket."""
 
 
 class ForkBackend(SocketBackend):
-    """Workers forked by a zygote on this machine; every call over their sockets."""
+    """Workers forked by a zygote on this machine (and, on a cluster, by each other node's
+    relay); every call over their sockets."""
 
     def __init__(
         self,
@@ -136,62 +173,106 @@ class ForkBackend(SocketBackend):
         *,
         spin_us: float | None = None,
         shared_memory: bool = True,
+        relay_tcp: bool = True,
         modules: list[str] | None = None,
+        cluster: bool = False,
     ) -> None:
+        """``cluster``: spread the workers over the connected Ray cluster's nodes (else all
+        on this machine, without Ray)."""
         self.start_timeout = start_timeout
         self.step_timeout = step_timeout
         self.actors: list[Any] = []  # no Ray actors: the inherited actor paths see none
-        self._init_sockets(spin_us, shared_memory, relay_tcp=False)
+        self._init_sockets(spin_us, shared_memory, relay_tcp)
         self._modules = list(modules or [])
         self._zygote: Zygote | None = None
         self._pids: list[int | None] = []
         self._paths: list[str] = []
+        self.cluster = cluster
+        self._nodes: list[str | None] = []  # each worker's node (None: this machine)
+        self._payloads: dict[int, bytes] = {}  # to fork on other nodes at the next _connect
+        if cluster:
+            import ray
+
+            self._ray = ray
 
     # -- processes ------------------------------------------------------------------------
     def start(self, group_kwargs: list[dict[str, Any]]) -> None:
-        self._open_directory(len(group_kwargs))
-        self._zygote = Zygote(self._modules, self.start_timeout)
-        self._pids = [None] * len(group_kwargs)
-        self._paths = [""] * len(group_kwargs)
+        workers = len(group_kwargs)
+        self._open_directory(workers)
+        self._pids = [None] * workers
+        self._paths = [""] * workers
+        self._nodes = [None] * workers
+        if self.cluster:
+            here = self._ray.get_runtime_context().get_node_id()
+            placed = spread_by_cpus(workers, cluster_nodes())
+            self._nodes = [None if node == here else node for node in placed]
+            accept_timeout = self.start_timeout or START_TIMEOUT_S
+            self._relays = Relays(self.spin_us, self.step_timeout, accept_timeout)
         try:
             for w, kwargs in enumerate(group_kwargs):
                 self._fork(w, kwargs)
-            self._connect(list(range(len(group_kwargs))))
+            self._connect(list(range(workers)))
         except BaseException:
             self.shutdown()
             raise
 
     def _fork(self, w: int, kwargs: dict[str, Any]) -> None:
+        """Fork worker ``w`` here, or keep its payload for its node's relay (:meth:`_connect`)."""
         import cloudpickle  # as Ray sends an actor's arguments (lambdas, closures)
 
-        assert self._zygote is not None and self._dir is not None
+        payload = cloudpickle.dumps(kwargs)
+        if self._nodes[w] is not None:
+            self._payloads[w] = payload
+            return
+        assert self._dir is not None
         self._opened += 1
         self._paths[w] = os.path.join(self._dir, f"w{w}-{self._opened}.sock")
-        payload = cloudpickle.dumps(kwargs)
-        try:
-            self._pids[w] = self._zygote.fork(payload, self._paths[w], self.spin_us * 1e-6)
-        except (OSError, EOFError):  # the zygote died (its workers live on): a new one
-            self._zygote.close()
-            self._zygote = Zygote(self._modules, self.start_timeout)
-            self._pids[w] = self._zygote.fork(payload, self._paths[w], self.spin_us * 1e-6)
+        request = (payload, self._paths[w], self.spin_us * 1e-6)
+        self._zygote, self._pids[w] = fork_worker(
+            self._zygote, self._modules, self.start_timeout, request
+        )
 
     def _replace_process(self, worker: int, kwargs: dict[str, Any]) -> None:
         self._kill(worker)
+        node = self._nodes[worker]
+        if node is not None and node not in (alive := cluster_nodes()):  # its node is gone
+            here = self._ray.get_runtime_context().get_node_id()
+            node = self._emptiest(alive)
+            self._nodes[worker] = None if node == here else node
         self._fork(worker, kwargs)
 
+    def _emptiest(self, nodes: dict[str, float]) -> str:
+        """The node of ``nodes`` with the most CPUs per worker placed there."""
+        if not nodes:
+            raise RuntimeError("no live node of the Ray cluster offers CPUs for a worker")
+        here = self._ray.get_runtime_context().get_node_id()
+        placed = [here if node is None else node for node in self._nodes]
+        return max(nodes, key=lambda node: nodes[node] / (1 + placed.count(node)))
+
     def _kill(self, w: int) -> None:
-        pid = self._pids[w]
-        if pid is not None:
+        pid, node = self._pids[w], self._nodes[w] if w < len(self._nodes) else None
+        if node is not None:  # its node's relay forked it
+            relay = self._relays.by_node.get(node) if self._relays is not None else None
+            if relay is not None:
+                with contextlib.suppress(Exception):
+                    relay.kill.remote(w)
+        elif pid is not None:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
 
     def pid(self, worker: int) -> int:
+        """Worker ``worker``'s process id (on its own node)."""
         return self._pids[worker]  # type: ignore[return-value]
 
+    def node(self, worker: int) -> str | None:
+        """The Ray node id of worker ``worker`` (None: the driver's machine)."""
+        return self._nodes[worker]
+
     def shutdown(self) -> None:
-        super().shutdown()  # closes every socket: the workers see their driver leave
+        super().shutdown()  # closes every socket, and the relays (they kill their workers)
         for w in range(len(self._pids)):
-            self._kill(w)
+            if self._nodes[w] is None:
+                self._kill(w)
         self._pids = []
         if self._zygote is not None:
             self._zygote.close()
@@ -199,76 +280,126 @@ class ForkBackend(SocketBackend):
 
     # -- connections ----------------------------------------------------------------------
     def _connect(self, workers: list[int]) -> None:
-        """Connect to ``workers`` as they listen, then wait until each has built its envs."""
-        for w in workers:
+        """Connect to ``workers`` as they listen (those of other nodes: their relays fork
+        and connect them), then wait until each has built its envs."""
+        here = [w for w in workers if self._nodes[w] is None]
+        for w in here:
             sock = self._socks[w] = self._dial(w)
             self._pollers[w] = _poller(sock)
         self._all_here = None not in self._socks
+        failed = self._fork_elsewhere([w for w in workers if self._nodes[w] is not None])
         saved, self.step_timeout = self.step_timeout, self.start_timeout
         try:  # building the envs may take longer than a step
-            outcomes = [self._resolve(self.submit(w, "ready")) for w in workers]
+            outcomes = [self._resolve(self.submit(w, "ready")) for w in here]
         finally:
             self.step_timeout = saved
-        for w, outcome in zip(workers, outcomes, strict=True):
-            if not outcome.ok:
-                raise RuntimeError(
-                    f"forked worker {w} failed while building its envs "
-                    f"(start_timeout={self.start_timeout} s):\n{outcome.error}"
-                )
-        for w in workers:
+        failed.update({w: o.error for w, o in zip(here, outcomes, strict=True) if not o.ok})
+        for w in sorted(failed):
+            where = "" if self._nodes[w] is None else f" on node {self._nodes[w]}"
+            raise RuntimeError(
+                f"forked worker {w}{where} failed while building its envs "
+                f"(start_timeout={self.start_timeout} s):\n{failed[w]}"
+            )
+        for w in here:
             self._socks[w].settimeout(self.step_timeout)  # type: ignore[union-attr]
+
+    def _fork_elsewhere(self, workers: list[int]) -> dict[int, str]:
+        """Have each node's relay fork and connect its ``workers`` (one call per node);
+        the workers that failed, with why."""
+        if not workers:
+            return {}
+        assert self._relays is not None
+        by_node: dict[str, list[int]] = {}
+        for w in workers:
+            by_node.setdefault(self._nodes[w], []).append(w)  # type: ignore[arg-type]
+        spin_s = self.spin_us * 1e-6
+        refs = {
+            node: self._relays.relay(node).fork.remote(
+                [(w, self._payloads.pop(w)) for w in group], spin_s, self._modules
+            )
+            for node, group in by_node.items()
+        }
+        timeout = None if self.start_timeout is None else 2 * self.start_timeout + RELAY_MARGIN_S
+        failed: dict[int, str] = {}
+        for node, ref in refs.items():
+            try:
+                replies = self._ray.get(ref, timeout=timeout)
+            except Exception as error:
+                self._relays.drop_node(node)
+                why = f"the relay of node {node} failed: {type(error).__name__}: {error}"
+                failed.update(dict.fromkeys(by_node[node], why))
+                continue
+            for w, pid, (_, kind, value) in replies:
+                self._pids[w] = pid
+                outcome = self._call_outcome(value) if kind == ANSWERED else None
+                if outcome is not None and outcome.ok:
+                    self._relays.node_of[w] = node
+                else:
+                    failed[w] = value if outcome is None else outcome.error
+        return failed
 
     def _dial(self, w: int) -> socket.socket:  # type: ignore[override]
         """A connection to worker ``w``'s socket, once it listens."""
         assert self._zygote is not None
-        timeout = self.start_timeout or START_TIMEOUT_S
-        deadline = time.monotonic() + timeout
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        while True:
-            try:
-                sock.connect(self._paths[w])
-                break
-            except (FileNotFoundError, ConnectionRefusedError):
-                ended = self._zygote.ending(self._pids[w])  # type: ignore[arg-type]
-                if ended is not None or time.monotonic() > deadline:
-                    sock.close()
-                    why = ended or f"did not listen within start_timeout={timeout} s"
-                    raise RuntimeError(
-                        f"forked worker {w} (pid {self._pids[w]}) {why} while starting; "
-                        "its error, if any, is above on stderr"
-                    ) from None
-                time.sleep(DIAL_PAUSE_S)
-        with contextlib.suppress(OSError):  # the worker unlinks it too, once it accepted
-            os.unlink(self._paths[w])
-        return sock
+        try:
+            return self._zygote.connect(
+                self._pids[w],  # type: ignore[arg-type]
+                self._paths[w],
+                self.start_timeout or START_TIMEOUT_S,
+            )
+        except RuntimeError as error:
+            raise RuntimeError(
+                f"forked worker {w} {error}; its error, if any, is above on stderr"
+            ) from None
 
     def _death_cause(self, w: int) -> str:
         """How worker ``w``'s process ended, as its parent, the zygote, saw it."""
-        pid = self._pids[w]
+        pid, node = self._pids[w], self._nodes[w]
+        if node is not None:
+            return self._death_elsewhere(w, node)
         ended = None
         if self._zygote is not None and pid is not None:
             with contextlib.suppress(OSError, EOFError):
                 ended = self._zygote.ending(pid, DEATH_PROBE_S)
         if ended is not None:
             return f"the worker process (pid {pid}) {ended}"
-        if pid is not None and not _running(pid):
+        if pid is not None and not running(pid):
             return f"the worker process (pid {pid}) ended; its parent, an earlier zygote, is gone"
         return f"the worker process (pid {pid}) is alive but closed its socket"
 
+    def _death_elsewhere(self, w: int, node: str) -> str:
+        """How worker ``w``, forked on ``node`` by its relay, ended, as the relay says."""
+        pid = self._pids[w]
+        relay = self._relays.by_node.get(node) if self._relays is not None else None
+        if relay is None:
+            return f"the worker process (pid {pid} on node {node}) is lost with its node's relay"
+        try:
+            ended = self._ray.get(
+                relay.ending.remote(w, DEATH_PROBE_S), timeout=DEATH_PROBE_S + RELAY_MARGIN_S
+            )
+        except Exception as error:
+            return f"the worker process (pid {pid} on node {node}): its relay failed ({error})"
+        if ended is not None:
+            return f"the worker process (pid {pid} on node {node}) {ended}"
+        return f"the worker process (pid {pid} on node {node}) is alive but closed its socket"
+
     # -- calls ----------------------------------------------------------------------------
     def submit(self, worker: int, method: str, *args: Any) -> Any:
-        """The packed step as the socket transport sends it; anything else as a call."""
-        sock = self._socks[worker]
-        if method == STEP_METHOD and sock is not None:
+        """The packed step as the socket transport sends it (through its node's relay for a
+        worker of another node); anything else as a call."""
+        sock, relayed = self._socks[worker], self._relayed(worker)
+        if method == STEP_METHOD and (sock is not None or relayed):
             return super().submit(worker, method, *args)
+        import cloudpickle
+
+        request = cloudpickle.dumps((method, args))
+        if relayed:
+            return self._relays.submit(worker, request, CALL)  # type: ignore[union-attr]
         deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
         handle = CallHandle(worker, deadline)
         if sock is None:
             handle.outcome = Outcome(False, None, f"worker {worker} is not connected", lost=True)
             return handle
-        import cloudpickle
-
-        request = cloudpickle.dumps((method, args))
         try:
             sock.sendall(REQUEST.pack(len(request), CALL) + request)
         except OSError as error:
@@ -284,6 +415,18 @@ class ForkBackend(SocketBackend):
             except (OSError, EOFError) as error:
                 handle.outcome = self._lost(handle.worker, error)
         return handle.outcome
+
+    def _relayed_outcome(self, w: int, relayed: tuple[str, Any], kind: int = 0) -> Outcome:
+        """A relayed worker's answer: a call's (``kind`` CALL) is its pickled Outcome."""
+        status, value = relayed
+        if kind == CALL and status == ANSWERED:
+            return self._call_outcome(value)
+        return super()._relayed_outcome(w, relayed, kind)
+
+    @staticmethod
+    def _call_outcome(answer: bytes) -> Outcome:
+        """The Outcome in a call's answer as the worker wrote it (length, pickle)."""
+        return pickle.loads(memoryview(answer)[CALL_ANSWER.size :])  # trusted: own worker
 
     def _read_call(self, w: int, deadline: float | None) -> Outcome:
         """One call's answer from worker ``w``'s socket: the Outcome it pickled."""

@@ -34,6 +34,7 @@ LENGTH = struct.Struct("<Q")
 #: and writes its answers (the one Gymnasium depends on: Ray's own would import all of Ray).
 BASE_MODULES = ("chronogym.vector.fork_transport", "cloudpickle")
 CLOSE_GRACE_S = 2.0  # how long the driver waits for the zygote to exit before killing it
+DIAL_PAUSE_S = 1e-3  # between tries to connect to a worker that is still starting
 
 
 def send(line: socket.socket, message: Any) -> None:
@@ -103,6 +104,26 @@ class Zygote:
         """How worker ``pid`` ended (None: still running after ``wait_s``)."""
         return self._ask(("status", pid, wait_s))
 
+    def connect(self, pid: int, path: str, timeout: float) -> socket.socket:
+        """A connection to worker ``pid``'s socket ``path``, once it listens; a RuntimeError
+        saying why if it ended first or did not listen within ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        while True:
+            try:
+                sock.connect(path)
+                break
+            except (FileNotFoundError, ConnectionRefusedError):
+                ended = self.ending(pid)
+                if ended is not None or time.monotonic() > deadline:
+                    sock.close()
+                    why = ended or f"did not listen within start_timeout={timeout} s"
+                    raise RuntimeError(f"(pid {pid}) {why} while starting") from None
+                time.sleep(DIAL_PAUSE_S)
+        with contextlib.suppress(OSError):  # the worker unlinks it too, once it accepted
+            os.unlink(path)
+        return sock
+
     def close(self) -> None:
         """Close the line: the zygote kills its workers still running and exits."""
         with contextlib.suppress(OSError):
@@ -112,6 +133,33 @@ class Zygote:
         except subprocess.TimeoutExpired:
             self._process.kill()
             self._process.wait()
+
+
+def fork_worker(
+    zygote: Zygote | None,
+    modules: list[str],
+    timeout: float | None,
+    request: tuple[bytes, str, float],
+) -> tuple[Zygote, int]:
+    """Fork a worker (``request``: its payload, socket path and spin) from ``zygote``, or
+    from a new one when there is none or it died (the workers it forked live on): the
+    zygote used, and the worker's pid."""
+    if zygote is not None:
+        try:
+            return zygote, zygote.fork(*request)
+        except (OSError, EOFError):
+            zygote.close()
+    zygote = Zygote(modules, timeout)
+    return zygote, zygote.fork(*request)
+
+
+def running(pid: int) -> bool:
+    """Is process ``pid`` alive (a zombie, ended but not yet reaped, is not)?"""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:  # gone (or no /proc: then assume alive, the milder message)
+        return not os.path.isdir("/proc") or os.path.exists(f"/proc/{pid}")
 
 
 # -- zygote side ------------------------------------------------------------------------------

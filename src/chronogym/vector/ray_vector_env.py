@@ -1,5 +1,5 @@
 """RayVectorEnv: a Gymnasium vector env whose simulations live in Ray actors (or, with
-``transport="fork"``, in processes forked on this machine)."""
+``transport="fork"``, in forked processes, on this machine or a cluster's nodes)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,12 @@ from chronogym.vector.checks import normalize_env_fns
 from chronogym.vector.driver_registry import DriverRegistry, script_registered_ids
 from chronogym.vector.driver_worker import DriverWorkerBackend
 from chronogym.vector.env_errors import check_env_errors
-from chronogym.vector.fork_transport import ForkBackend, check_fork_arguments, preload_modules
+from chronogym.vector.fork_transport import (
+    ForkBackend,
+    check_fork_arguments,
+    forks_here_only,
+    preload_modules,
+)
 from chronogym.vector.shared_step import usable_cpus
 from chronogym.vector.socket_transport import SocketBackend, check_spin_us
 from chronogym.vector.worker_vector_env import WorkerVectorEnv
@@ -119,16 +124,19 @@ class RayVectorEnv(WorkerVectorEnv):
             actor call per worker. See ``docs/performance/vector.md``. Box spaces
             only; other calls (reset, ``call``, other spaces) always use plain
             actor calls, and faults are handled the same way with both
-            transports. ``"fork"``: no Ray at all; every worker is a process
-            forked on this machine from one warm process that imported the
-            envs' modules once (:mod:`chronogym.vector.fork_transport`), and
-            every call goes over its socket. A worker starts in ~15 ms of CPU
+            transports. ``"fork"``: workers are not Ray actors; every worker is
+            a process forked from one warm process that imported the envs'
+            modules once (:mod:`chronogym.vector.fork_transport`), and every
+            call goes over its socket. A worker starts in ~15 ms of CPU
             instead of a Ray worker's ~0.7 s (64 MuJoCo cart-poles on 2 cores:
             7 s to the first reset instead of 57-60 s) and carries no Ray
-            threads while it steps. Same numbers and fault handling; this machine only, so
-            the Ray arguments (``address``, ``scheduling``, ``worker_niceness``,
-            and the CPUs and GPUs per worker) keep their defaults (a
-            ValueError names one that does not).
+            threads while it steps. Same numbers and fault handling. Without
+            ``address`` (or ``RAY_ADDRESS``), every worker is on this machine and
+            Ray is not used at all; with one, the workers are spread over the cluster's live nodes
+            in proportion to their CPUs, each other node's forked by its relay.
+            Nothing is reserved for them, so ``scheduling``,
+            ``worker_niceness`` and the CPUs and GPUs per worker keep their
+            defaults (a ValueError names one that does not).
         spin_us: ``transport="socket"`` or ``"fork"`` only: µs each end of a socket spins
             (polling, yielding its core to other processes) before it blocks
             on a read; an answer caught while spinning saves the wake-up of
@@ -143,7 +151,7 @@ class RayVectorEnv(WorkerVectorEnv):
             ``recv`` and ``profile_steps()`` still use one socket message per
             worker. Default True; False: messages only. Same numbers either
             way.
-        relay_tcp: ``transport="socket"`` with workers on other nodes only:
+        relay_tcp: ``transport="socket"`` or ``"fork"`` with workers on other nodes only:
             each node's relay answers the shared-memory barrier ``step`` over
             a direct TCP connection to the driver, not a Ray call per node
             and step (:mod:`chronogym.vector.relay_channel`; a Ray call costs
@@ -221,15 +229,13 @@ class RayVectorEnv(WorkerVectorEnv):
             check_fork_arguments(
                 num_cpus=num_cpus,
                 num_gpus=num_gpus,
-                address=address,
                 worker_niceness=worker_niceness,
                 scheduling=scheduling,
             )
         if transport in ("socket", "fork"):
             options["spin_us"] = check_spin_us(spin_us)
             options["shared_memory"] = shared_memory
-            if transport == "socket":
-                options["relay_tcp"] = relay_tcp
+            options["relay_tcp"] = relay_tcp
         elif spin_us is not None:
             raise ValueError(
                 f"spin_us={spin_us!r} with transport={transport!r}: spin_us applies to "
@@ -244,10 +250,11 @@ class RayVectorEnv(WorkerVectorEnv):
         actor_scheduling(scheduling)  # validate before starting Ray
         check_env_errors(env_errors)
         forked = transport == "fork"
-        if not forked:
+        local = forked and forks_here_only(address)  # forked on this machine: no Ray at all
+        if not local:
             ensure_ray(address, worker_niceness)
         if envs_per_worker is None:
-            cpus = max(1, usable_cpus() if forked else int(cluster_cpus()))
+            cpus = max(1, usable_cpus() if local else int(cluster_cpus()))
             envs_per_worker = math.ceil(count / cpus)
         num_actors = math.ceil(count / envs_per_worker) - int(driver_worker)
         self.driver_worker = driver_worker
@@ -255,7 +262,9 @@ class RayVectorEnv(WorkerVectorEnv):
         if forked:  # no Ray: nothing reserved per worker
             self.num_cpus_per_worker, self.num_gpus_per_worker = 0.0, 0.0
             modules = preload_modules(normalize_env_fns(env_fns, num_envs))
-            backend = ForkBackend(start_timeout, step_timeout, modules=modules, **options)
+            backend = ForkBackend(
+                start_timeout, step_timeout, modules=modules, cluster=not local, **options
+            )
         else:
             self.num_cpus_per_worker = resolve_worker_cpus(num_cpus, max(num_actors, 1))
             self.num_gpus_per_worker = check_worker_gpus(num_gpus, max(num_actors, 1))

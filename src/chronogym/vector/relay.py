@@ -25,6 +25,12 @@ the barrier step over a TCP line that the relay accepts only from the peer holdi
 it handed out through Ray; a relay and its workers through Unix sockets in a private folder
 of their node.
 
+Forked workers (``transport="fork"`` with an ``address``): a relay also forks its node's
+workers itself (:meth:`NodeRelay.fork`), from a zygote of its own on that node
+(:mod:`chronogym.vector.fork_zygote`), so they are not Ray actors: their other calls (reset,
+``call``...) travel through the relay as pickled calls over the same sockets (kind
+:data:`~chronogym.vector.wire_format.CALL`), one Ray call per node for a whole batch of them.
+
 Faults: a worker whose socket fails (EOF, a reset, ``step_timeout``) is reported lost by the
 relay, and the driver replaces it as any lost worker, then connects its replacement. A relay
 that dies (its node is lost) makes every worker it served lost; a new relay is started for
@@ -36,7 +42,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+import pickle
 import shutil
+import signal
 import socket
 import tempfile
 import threading
@@ -56,9 +64,10 @@ from chronogym.vector.relay_channel import (
     SharedRows,
 )
 from chronogym.vector.shared_step import SharedLayout, SharedStep
-from chronogym.vector.wire_format import ANSWER, REQUEST, fill
+from chronogym.vector.wire_format import ANSWER, CALL, CALL_ANSWER, REQUEST, fill
 
 T = TypeVar("T")
+FORK_DEATH_PROBE_S = 2.0  # how long a relay waits to learn how a forked worker that hung up ended
 
 
 def locked(method: Callable[..., T]) -> Callable[..., T]:
@@ -89,6 +98,8 @@ class NodeRelay:
         self.shared_workers: list[int] = []  # its workers, in the order of its block
         self.line: RelayLine | None = None  # the driver's TCP line for the shared step
         self.lock = threading.RLock()  # see :func:`locked`
+        self.zygote: Any = None  # forks this node's workers (transport="fork"), once asked
+        self.forked: dict[int, int] = {}  # forked worker -> its pid
 
     def node_id(self) -> str:
         import ray
@@ -129,28 +140,107 @@ class NodeRelay:
                 sock.close()
 
     @locked
-    def step(self, requests: list[tuple[int, bytes, bool]]) -> list[RelayAnswer]:
-        """Send each worker its action bytes, then read every answer (raw bytes)."""
+    def step(self, requests: list[tuple[int, bytes, int]]) -> list[RelayAnswer]:
+        """Send each worker its request (``kind``: a step, 0 or 1 timed, or a forked
+        worker's :data:`~chronogym.vector.wire_format.CALL`), then read every answer (its
+        raw bytes, as the worker wrote them)."""
         failed: dict[int, RelayAnswer] = {}
-        for worker, data, timed in requests:
+        for worker, data, kind in requests:
             sock = self.socks.get(worker)
             if sock is None:
                 failed[worker] = (worker, LOST, "the relay holds no socket to this worker")
                 continue
             try:
-                sock.sendall(REQUEST.pack(len(data), timed) + data)
+                sock.sendall(REQUEST.pack(len(data), kind) + data)
             except OSError as error:
                 failed[worker] = self._failed(worker, error)
         answers: list[RelayAnswer] = []
-        for worker, _, _ in requests:
+        for worker, _, kind in requests:
             if worker in failed:
                 answers.append(failed[worker])
                 continue
             try:
-                answers.append((worker, ANSWERED, self._read(worker)))
+                read = self._read_call if kind == CALL else self._read
+                answers.append((worker, ANSWERED, read(worker)))
             except (OSError, EOFError) as error:
                 answers.append(self._failed(worker, error))
         return answers
+
+    # -- forked workers (transport="fork") ------------------------------------------------
+    @locked
+    def fork(
+        self, requests: list[tuple[int, bytes]], spin_s: float, modules: list[str]
+    ) -> list[tuple[int, int | None, RelayAnswer]]:
+        """Fork each ``(worker, payload)`` on this node from this relay's zygote (started at
+        the first fork, ``modules`` imported once), connect to it, and ask it ``ready``
+        (its envs built, within ``accept_timeout``): per worker, its pid (None if it never
+        started) and the ready call's answer, as :meth:`step` gives it."""
+        from chronogym.vector.fork_zygote import fork_worker
+
+        started: dict[int, tuple[int, str]] = {}
+        replies: dict[int, tuple[int, int | None, RelayAnswer]] = {}
+        for worker, payload in requests:
+            self.disconnect(worker)
+            self.kill(worker)
+            self.opened += 1
+            path = os.path.join(self.dir, f"w{worker}-{self.opened}.sock")
+            try:
+                request = (payload, path, spin_s)
+                self.zygote, pid = fork_worker(self.zygote, modules, self.accept_timeout, request)
+            except (OSError, EOFError, RuntimeError) as error:
+                why = f"could not fork worker {worker} on its node: {error}"
+                replies[worker] = (worker, None, (worker, LOST, why))
+                continue
+            self.forked[worker] = pid
+            started[worker] = (pid, path)
+        ready = pickle.dumps(("ready", ()))
+        for worker, (pid, path) in started.items():
+            try:
+                sock = self.zygote.connect(pid, path, self.accept_timeout)
+            except RuntimeError as error:
+                replies[worker] = (worker, pid, (worker, LOST, f"forked worker {worker} {error}"))
+                continue
+            sock.settimeout(self.accept_timeout)  # building its envs may outlast a step
+            self.socks[worker], self.bufs[worker] = sock, bytearray(4096)
+        asked = [(w, ready, CALL) for w in started if w not in replies]
+        for answer in self.step(asked):
+            worker, status, value = answer
+            pid = started[worker][0]
+            if status != ANSWERED:  # it died building its envs: name how, as its zygote saw
+                ended = None
+                with contextlib.suppress(OSError, EOFError):
+                    ended = self.zygote.ending(pid, FORK_DEATH_PROBE_S)
+                if ended is not None:
+                    answer = (worker, status, f"the worker process (pid {pid}) {ended} ({value})")
+            replies[worker] = (worker, pid, answer)
+            if worker in self.socks:
+                self.socks[worker].settimeout(self.step_timeout)
+        return [replies[worker] for worker, _ in requests]
+
+    @locked
+    def ending(self, worker: int, wait_s: float) -> str | None:
+        """How forked worker ``worker``'s process ended, as its zygote saw it (None: it
+        runs, or an earlier zygote forked it and it is gone: then says so)."""
+        from chronogym.vector.fork_zygote import running
+
+        pid = self.forked.get(worker)
+        if pid is None:
+            return None
+        ended = None
+        if self.zygote is not None:
+            with contextlib.suppress(OSError, EOFError):
+                ended = self.zygote.ending(pid, wait_s)
+        if ended is None and not running(pid):
+            return "ended; its parent, an earlier zygote, is gone"
+        return ended
+
+    @locked
+    def kill(self, worker: int) -> None:
+        """SIGKILL forked worker ``worker`` (a replacement is forked next)."""
+        pid = self.forked.pop(worker, None)
+        if pid is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
 
     @locked
     def open_shared(
@@ -246,6 +336,16 @@ class NodeRelay:
         fill(sock, view, got, total)
         return bytes(view[:total])
 
+    def _read_call(self, worker: int) -> bytes:
+        """A forked worker's answer to a call: its length, then its pickled Outcome."""
+        sock = self.socks[worker]
+        head = bytearray(CALL_ANSWER.size)
+        fill(sock, memoryview(head), 0, CALL_ANSWER.size)
+        (size,) = CALL_ANSWER.unpack(head)
+        body = bytearray(size)
+        fill(sock, memoryview(body), 0, size)
+        return bytes(head + body)
+
     def _failed(self, worker: int, error: BaseException) -> RelayAnswer:
         self.disconnect(worker)
         if isinstance(error, TimeoutError):
@@ -258,6 +358,11 @@ class NodeRelay:
         self.close_shared()
         for worker in list(self.socks):
             self.disconnect(worker)
+        for worker in list(self.forked):
+            self.kill(worker)
+        if self.zygote is not None:
+            self.zygote.close()
+            self.zygote = None
         shutil.rmtree(self.dir, ignore_errors=True)
 
 
@@ -277,7 +382,7 @@ class RelayHandle:
 
     worker: int
     data: bytes
-    timed: bool
+    kind: int  # REQUEST's flag byte: 0 or 1 (a step, timed), or CALL (a forked worker's)
     call: RelayCall
     outcome: Any = None
 
@@ -335,19 +440,20 @@ class Relays:
             with contextlib.suppress(Exception):
                 self.by_node[node].disconnect.remote(worker)
 
-    def submit(self, worker: int, data: bytes, timed: bool) -> RelayHandle:
-        """Queue a step of ``worker``; it leaves with its node's others at :meth:`flush`."""
+    def submit(self, worker: int, data: bytes, kind: int) -> RelayHandle:
+        """Queue a request of ``worker`` (``kind``: see :class:`RelayHandle`); it leaves with
+        its node's others at :meth:`flush`."""
         node = self.node_of[worker]
         queued = self.pending.setdefault(node, [])
         call = queued[0].call if queued else RelayCall(node)
-        handle = RelayHandle(worker, bytes(data), timed, call)
+        handle = RelayHandle(worker, bytes(data), kind, call)
         queued.append(handle)
         return handle
 
     def flush(self) -> None:
         """Send every queued step: one call per node."""
         for node, handles in self.pending.items():
-            requests = [(h.worker, h.data, h.timed) for h in handles]
+            requests = [(h.worker, h.data, h.kind) for h in handles]
             handles[0].call.ref = self.by_node[node].step.remote(requests)
         self.pending = {}
 

@@ -350,15 +350,17 @@ class SharedStep:
 
     @staticmethod
     def _why_lost(w: int, sock: socket.socket | None, deadline: float | None) -> Any:
-        """Why worker ``w`` will not answer (its socket closed, or past the deadline), or None."""
+        """Why worker ``w`` will not answer (its socket closed, or past the deadline), or None
+        (the text names no worker: a relay's block numbers them its own way; the caller's
+        message names it)."""
         if sock is None:
-            return EOFError(f"worker {w}'s socket was closed before its answer came")
+            return EOFError("its socket was closed before its answer came")
         poller = select.poll()  # not select(): a driver may hold more than 1024 descriptors
         poller.register(sock, select.POLLIN)
         if poller.poll(0):
             with contextlib.suppress(BlockingIOError, OSError):
                 if sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b"":
-                    return EOFError(f"worker {w} hung up during a shared step")
+                    return EOFError("it hung up during a shared step")
         if deadline is not None and time.monotonic() >= deadline:
             return TimeoutError()
         return None

@@ -555,7 +555,7 @@ class SocketBackend(ActorBackend):
         """A step of a connected worker goes over its socket; anything else, plain."""
         sock = self._socks[worker]
         if method == STEP_METHOD and sock is None and self._relayed(worker):
-            timed = bool(args[1]) if len(args) > 1 else False
+            timed = int(bool(args[1])) if len(args) > 1 else 0
             return self._relays.submit(worker, args[0], timed)  # type: ignore[union-attr]
         if method != STEP_METHOD or sock is None:
             return super().submit(worker, method, *args)
@@ -658,11 +658,12 @@ class SocketBackend(ActorBackend):
                 relayed: tuple[str, Any] = (LOST, handle.call.failure)
             else:
                 relayed = answers.get(handle.worker, (LOST, "no answer from the relay"))
-            handle.outcome = self._relayed_outcome(handle.worker, relayed)
+            handle.outcome = self._relayed_outcome(handle.worker, relayed, handle.kind)
         return handle.outcome
 
-    def _relayed_outcome(self, w: int, relayed: tuple[str, Any]) -> Outcome:
-        """Worker ``w``'s (kind, value) from its relay, as if read from its socket here."""
+    def _relayed_outcome(self, w: int, relayed: tuple[str, Any], kind: int = 0) -> Outcome:
+        """Worker ``w``'s (status, value) from its relay, as if read from its socket here
+        (``kind``: the request's; a step's here)."""
         kind, value = relayed
         if kind == ANSWERED:
             status, *sizes = ANSWER.unpack_from(value)
