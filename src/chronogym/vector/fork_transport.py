@@ -224,6 +224,10 @@ class ForkBackend(SocketBackend):
         if self._nodes[w] is not None:
             self._payloads[w] = payload
             return
+        self._fork_here(w, payload)
+
+    def _fork_here(self, w: int, payload: bytes) -> None:
+        """Fork worker ``w`` (its pickled EnvGroup arguments ``payload``) on this machine."""
         assert self._dir is not None
         self._opened += 1
         self._paths[w] = os.path.join(self._dir, f"w{w}-{self._opened}.sock")
@@ -234,20 +238,21 @@ class ForkBackend(SocketBackend):
 
     def _replace_process(self, worker: int, kwargs: dict[str, Any]) -> None:
         self._kill(worker)
-        node = self._nodes[worker]
-        if node is not None and node not in (alive := cluster_nodes()):  # its node is gone
-            here = self._ray.get_runtime_context().get_node_id()
-            node = self._emptiest(alive)
-            self._nodes[worker] = None if node == here else node
+        if self._nodes[worker] is not None and self._nodes[worker] not in cluster_nodes():
+            self._move(worker, set())  # its node is gone
         self._fork(worker, kwargs)
 
-    def _emptiest(self, nodes: dict[str, float]) -> str:
-        """The node of ``nodes`` with the most CPUs per worker placed there."""
+    def _move(self, worker: int, avoid: set[str]) -> bool:
+        """Place ``worker`` on the live node, not in ``avoid``, with the most CPUs per worker
+        placed there; False if there is none."""
+        nodes = {n: cpus for n, cpus in cluster_nodes().items() if n not in avoid}
         if not nodes:
-            raise RuntimeError("no live node of the Ray cluster offers CPUs for a worker")
+            return False
         here = self._ray.get_runtime_context().get_node_id()
         placed = [here if node is None else node for node in self._nodes]
-        return max(nodes, key=lambda node: nodes[node] / (1 + placed.count(node)))
+        node = max(nodes, key=lambda n: nodes[n] / (1 + placed.count(n)))
+        self._nodes[worker] = None if node == here else node
+        return True
 
     def _kill(self, w: int) -> None:
         pid, node = self._pids[w], self._nodes[w] if w < len(self._nodes) else None
@@ -282,12 +287,14 @@ class ForkBackend(SocketBackend):
     def _connect(self, workers: list[int]) -> None:
         """Connect to ``workers`` as they listen (those of other nodes: their relays fork
         and connect them), then wait until each has built its envs."""
-        here = [w for w in workers if self._nodes[w] is None]
+        failed = self._fork_elsewhere([w for w in workers if self._nodes[w] is not None])
+        here = [w for w in workers if self._nodes[w] is None and w not in failed]
         for w in here:
+            if w in self._payloads:  # moved here from a node whose relay failed
+                self._fork_here(w, self._payloads.pop(w))
             sock = self._socks[w] = self._dial(w)
             self._pollers[w] = _poller(sock)
         self._all_here = None not in self._socks
-        failed = self._fork_elsewhere([w for w in workers if self._nodes[w] is not None])
         saved, self.step_timeout = self.step_timeout, self.start_timeout
         try:  # building the envs may take longer than a step
             outcomes = [self._resolve(self.submit(w, "ready")) for w in here]
@@ -304,39 +311,57 @@ class ForkBackend(SocketBackend):
             self._socks[w].settimeout(self.step_timeout)  # type: ignore[union-attr]
 
     def _fork_elsewhere(self, workers: list[int]) -> dict[int, str]:
-        """Have each node's relay fork and connect its ``workers`` (one call per node);
-        the workers that failed, with why."""
-        if not workers:
-            return {}
-        assert self._relays is not None
-        by_node: dict[str, list[int]] = {}
-        for w in workers:
-            by_node.setdefault(self._nodes[w], []).append(w)  # type: ignore[arg-type]
-        spin_s = self.spin_us * 1e-6
-        refs = {
-            node: self._relays.relay(node).fork.remote(
-                [(w, self._payloads.pop(w)) for w in group], spin_s, self._modules
-            )
-            for node, group in by_node.items()
-        }
-        timeout = None if self.start_timeout is None else 2 * self.start_timeout + RELAY_MARGIN_S
+        """Have each node's relay fork and connect its ``workers`` (one call per node); a
+        node whose relay fails (a node lost meanwhile) has its workers placed again, on the
+        other live nodes (this machine's kept for :meth:`_connect` to fork). The workers
+        that failed, with why."""
+        assert self._relays is not None or not workers
         failed: dict[int, str] = {}
-        for node, ref in refs.items():
-            try:
-                replies = self._ray.get(ref, timeout=timeout)
-            except Exception as error:
-                self._relays.drop_node(node)
-                why = f"the relay of node {node} failed: {type(error).__name__}: {error}"
-                failed.update(dict.fromkeys(by_node[node], why))
-                continue
-            for w, pid, (_, kind, value) in replies:
-                self._pids[w] = pid
-                outcome = self._call_outcome(value) if kind == ANSWERED else None
-                if outcome is not None and outcome.ok:
-                    self._relays.node_of[w] = node
-                else:
-                    failed[w] = value if outcome is None else outcome.error
+        avoid: set[str] = set()
+        while workers:
+            by_node: dict[str, list[int]] = {}
+            for w in workers:
+                by_node.setdefault(self._nodes[w], []).append(w)  # type: ignore[arg-type]
+            spin_s, relays = self.spin_us * 1e-6, self._relays
+            refs = {  # every node's relay forks at once
+                node: relays.relay(node).fork.remote(  # type: ignore[union-attr]
+                    [(w, self._payloads[w]) for w in group], spin_s, self._modules
+                )
+                for node, group in by_node.items()
+            }
+            workers = []
+            for node, group in by_node.items():
+                why = self._forked_on(node, refs[node], failed)
+                if why is None:
+                    continue
+                avoid.add(node)
+                for w in group:
+                    if not self._move(w, avoid):
+                        failed[w] = why
+                        self._payloads.pop(w, None)
+                    elif self._nodes[w] is not None:
+                        workers.append(w)
         return failed
+
+    def _forked_on(self, node: str, ref: Any, failed: dict[int, str]) -> str | None:
+        """The answer of ``node``'s relay to its fork call ``ref``: the workers that failed go
+        in ``failed``. Why the relay itself failed (then it is dropped), else None."""
+        assert self._relays is not None
+        timeout = None if self.start_timeout is None else 2 * self.start_timeout + RELAY_MARGIN_S
+        try:
+            replies = self._ray.get(ref, timeout=timeout)
+        except Exception as error:
+            self._relays.drop_node(node)
+            return f"the relay of node {node} failed: {type(error).__name__}: {error}"
+        for w, pid, (_, kind, value) in replies:
+            self._pids[w] = pid
+            del self._payloads[w]
+            outcome = self._call_outcome(value) if kind == ANSWERED else None
+            if outcome is not None and outcome.ok:
+                self._relays.node_of[w] = node
+            else:
+                failed[w] = value if outcome is None else outcome.error
+        return None
 
     def _dial(self, w: int) -> socket.socket:  # type: ignore[override]
         """A connection to worker ``w``'s socket, once it listens."""
