@@ -7,8 +7,9 @@ import time
 
 import numpy as np
 import pytest
+from local_clusters import driving
 
-from chronogym.testing import LocalCluster, ray_start_available
+from chronogym.testing import ray_start_available
 
 _UNAVAILABLE = ray_start_available()
 pytestmark = pytest.mark.skipif(
@@ -19,18 +20,9 @@ pytestmark = pytest.mark.skipif(
 @pytest.fixture
 def cluster():
     """Head + 1 worker node, 1 CPU each (this process is the driver); its own cluster, since
-    the test kills a node. A Ray already initialized by other tests is restarted after."""
-    import ray
-
-    was_local = ray.is_initialized()
-    if was_local:
-        ray.shutdown()
-    with LocalCluster(workers=1, num_cpus=1) as local:
-        local.connect()
+    the test kills a node."""
+    with driving(workers=1, num_cpus=1) as local:
         yield local
-        local.disconnect()
-    if was_local:
-        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
 
 
 def test_forked_workers_of_a_lost_node_are_forked_again_on_a_live_one(cluster):

@@ -8,9 +8,10 @@ import math
 
 import numpy as np
 import pytest
+from local_clusters import driving
 from vector_rollouts import synthetic_rollout
 
-from chronogym.testing import LocalCluster, ray_start_available
+from chronogym.testing import ray_start_available
 
 _UNAVAILABLE = ray_start_available()
 pytestmark = pytest.mark.skipif(
@@ -24,22 +25,10 @@ TIMING_COLUMNS = ("wall_time", "collect_s", "learn_s", "eval_s")
 
 @pytest.fixture(scope="module")
 def cluster():
-    """Head + 2 worker nodes, 1 CPU each; this process is the driver.
-
-    A Ray already initialized by other tests (the session's local cluster) is
-    shut down first and started again afterwards, as conftest.py starts it.
-    """
-    import ray
-
-    was_local = ray.is_initialized()
-    if was_local:
-        ray.shutdown()
-    with LocalCluster(workers=2, num_cpus=1) as local:
-        local.connect()
+    """Head + 2 worker nodes, 1 CPU each; this process is the driver (the session's local
+    Ray set aside meanwhile)."""
+    with driving(workers=2, num_cpus=1) as local:
         yield local
-        local.disconnect()
-    if was_local:
-        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
 
 
 def go1_rollout(vec, steps: int, seed: int = 5) -> list[np.ndarray]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import socket
 
 import pytest
+from local_clusters import without_session_ray
 
 import chronogym.testing.cluster as cluster_module
 from chronogym.testing import LocalCluster, ray_start_available
@@ -28,8 +29,6 @@ _UNAVAILABLE = ray_start_available()
 
 @pytest.mark.skipif(_UNAVAILABLE is not None, reason=f"`ray start` unavailable: {_UNAVAILABLE}")
 def test_a_port_clash_at_start_is_retried_with_fresh_ports(monkeypatch):
-    import ray
-
     calls = []
     real = cluster_module.free_ports
 
@@ -41,16 +40,9 @@ def test_a_port_clash_at_start_is_retried_with_fresh_ports(monkeypatch):
         return ports
 
     monkeypatch.setattr(cluster_module, "free_ports", clashing_on_first_node)
-    was_local = ray.is_initialized()
-    if was_local:
-        ray.shutdown()
-    try:
-        with LocalCluster(workers=0, num_cpus=1) as local:
-            assert len(local._alive_nodes()) == 1
-        assert len(calls) >= 4, calls  # a second try picked fresh ports
-    finally:
-        if was_local:
-            ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    with without_session_ray(), LocalCluster(workers=0, num_cpus=1) as local:
+        assert len(local._alive_nodes()) == 1
+    assert len(calls) >= 4, calls  # a second try picked fresh ports
 
 
 def test_node_start_error_says_whether_a_port_clashed():
