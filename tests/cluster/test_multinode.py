@@ -373,6 +373,32 @@ def test_a_forked_worker_that_dies_building_on_another_node_is_a_clear_error(clu
         RayVectorEnv(fns, envs_per_worker=1, transport="fork", address=cluster.address)
 
 
+@pytest.mark.parametrize("transport", ["socket", "fork"])
+def test_batch_mode_with_workers_on_other_nodes_matches_sync(cluster, transport):
+    """EnvPool's batch (``recv(min_envs=2, max_envs=2)``) with workers on every node: Ray
+    workers through their relays' calls, or forked ones; the same numbers per env."""
+    from gymnasium.utils.env_checker import data_equivalence
+    from vector_rollouts import STEPS, async_rollout, sync_replay, uneven_fns
+
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+
+    fns = uneven_fns()
+    options = {"transport": "fork"}
+    if transport == "socket":
+        options = {"scheduling": "spread", "num_cpus": 0.5}
+    vec = RayVectorEnv(fns, envs_per_worker=1, address=cluster.address, **options)
+    try:
+        assert sum(vec._backend.relayed()) >= 2
+        traj, acts, (batches, _) = async_rollout(vec, STEPS, min_envs=2, max_envs=2)
+    finally:
+        vec.close()
+    assert len(batches[0]) == 2 and {len(b) for b in batches} <= {1, 2}
+    reference = sync_replay(fns, acts, STEPS, "NextStep")
+    for i in range(len(fns)):
+        for t, (got, want) in enumerate(zip(traj[i], reference[i], strict=True)):
+            assert data_equivalence(got, want, exact=True), f"env {i} differs at step {t}"
+
+
 def test_workers_group_by_node_with_their_rows():
     from chronogym.vector.spread_step import HERE, by_node
 
