@@ -90,14 +90,14 @@ def build_group(env_id: str, worker: int, step_ms: float | None) -> Any:
 
 def serve(path: str, env_id: str, worker: int, step_ms: float | None, spin_s: float) -> None:
     """A fresh interpreter's worker: listen on ``path``, then serve the driver that connects."""
-    from chronogym.vector.socket_transport import _serve
+    from chronogym.vector.socket_transport import serve_listener
 
     group = build_group(env_id, worker, step_ms)
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind(path)
     listener.listen(1)
     Path(path + ".ready").touch()
-    _serve(group, listener, path, spin_s)
+    serve_listener(group, listener, path, spin_s)
 
 
 def start_processes(

@@ -51,8 +51,8 @@ from chronogym.vector.socket_transport import (
     STEP_METHOD,
     SocketBackend,
     SockHandle,
-    _poller,
-    _serve,
+    poller_of,
+    serve_listener,
 )
 from chronogym.vector.wire_format import CALL, CALL_ANSWER, REQUEST, fill
 
@@ -122,7 +122,7 @@ def serve_forked(payload: bytes, path: str, spin_s: float) -> None:
     listener.listen(1)
     listener.settimeout(ACCEPT_TIMEOUT_S)
     group = ActorGroup(**pickle.loads(payload))  # trusted: own driver (its zygote's line)
-    _serve(group, listener, path, spin_s)
+    serve_listener(group, listener, path, spin_s)
 
 
 def preload_modules(env_fns: list[Any]) -> list[str]:
@@ -293,7 +293,7 @@ class ForkBackend(SocketBackend):
             if w in self._payloads:  # moved here from a node whose relay failed
                 self._fork_here(w, self._payloads.pop(w))
             sock = self._socks[w] = self._dial(w)
-            self._pollers[w] = _poller(sock)
+            self._pollers[w] = poller_of(sock)
         self._all_here = None not in self._socks
         saved, self.step_timeout = self.step_timeout, self.start_timeout
         try:  # building the envs may take longer than a step

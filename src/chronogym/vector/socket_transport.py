@@ -135,7 +135,7 @@ def spin_until_readable(poller: select.poll, spin_s: float) -> bool:
     return True
 
 
-def _poller(sock: socket.socket, *fds: int) -> select.poll:
+def poller_of(sock: socket.socket, *fds: int) -> select.poll:
     """A poll object over ``sock`` (and ``fds``) for reading."""
     poller = select.poll()
     for fd in (sock, *fds):
@@ -171,10 +171,10 @@ def serve_socket(group: EnvGroup, path: str, spin_us: float = DEFAULT_SPIN_US) -
     listener.listen(1)
     listener.settimeout(ACCEPT_TIMEOUT_S)
     args = (group, listener, path, spin_us * 1e-6)
-    threading.Thread(target=_serve, args=args, daemon=True).start()
+    threading.Thread(target=serve_listener, args=args, daemon=True).start()
 
 
-def _serve(group: EnvGroup, listener: socket.socket, path: str, spin_s: float) -> None:
+def serve_listener(group: EnvGroup, listener: socket.socket, path: str, spin_s: float) -> None:
     """Accept the driver (once), then answer its step requests until it hangs up."""
     try:
         conn, _ = listener.accept()
@@ -195,7 +195,7 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
     (:mod:`chronogym.vector.shared_step`)."""
     head = memoryview(bytearray(REQUEST.size))
     data = memoryview(bytearray(256))
-    plain, spinner = _poller(conn), AdaptiveSpin(spin_s)
+    plain, spinner = poller_of(conn), AdaptiveSpin(spin_s)
     step_shared = functools.partial(_step_bytes, group, timed=False)
     shared: SharedServer | None = None
     go_pollers: dict[int, select.poll] = {}
@@ -224,7 +224,7 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
                     shared.close()
                 shared = _attach(conn, size)
                 if shared is not None:
-                    go_pollers = {fd: _poller(conn, fd) for fd in shared.go_fds}
+                    go_pollers = {fd: poller_of(conn, fd) for fd in shared.go_fds}
                 continue
             if size > len(data):
                 data = memoryview(bytearray(size))
@@ -363,7 +363,7 @@ class SocketBackend(ActorBackend):
         elsewhere = []
         for w in workers:
             sock = self._socks[w] = self._dial(refs[w], paths[w])
-            self._pollers[w] = None if sock is None else _poller(sock)
+            self._pollers[w] = None if sock is None else poller_of(sock)
             if sock is None:
                 elsewhere.append(w)
         self._all_here = None not in self._socks
