@@ -267,6 +267,9 @@ def test_forked_workers_spread_over_the_nodes_match_serial(cluster):
     """transport="fork" with an address: the workers spread over the 3 nodes by their CPUs
     (2 each), those of other nodes forked by their node's relay; no Ray actor per worker;
     steps, resets and calls through the relays; the same numbers as serial."""
+    import time
+
+    from chronogym.vector.fork_zygote import running
     from chronogym.vector.ray_vector_env import RayVectorEnv
     from chronogym.vector.serial import SerialVectorEnv
 
@@ -285,8 +288,13 @@ def test_forked_workers_spread_over_the_nodes_match_serial(cluster):
         assert vec.get_attr("spec")[4].id == GO1  # a call through node_2's relay
         vec.set_attr("marker", list(range(6)))
         assert list(vec.get_attr("marker")) == list(range(6))
+        pids = vec.worker_pids()
     finally:
         vec.close()
+    deadline = time.monotonic() + 10  # the relays' zygotes kill their workers as they close
+    while any(running(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(running(pid) for pid in pids)
     serial = SerialVectorEnv(GO1, 6)
     try:
         reference = go1_rollout(serial, steps=40)
