@@ -171,9 +171,10 @@ def test_pushing_the_cart_tilts_the_pole_back(chrono):
     assert obs[0] > 0 and obs[2] > 0 and obs[1] < 0 and obs[3] < 0
 
 
-def test_ray_matches_serial_bit_for_bit(chrono, ray_cluster):
+@pytest.mark.parametrize("transport", ["socket", "fork"])
+def test_ray_matches_serial_bit_for_bit(chrono, ray_cluster, transport):
     serial = vector_rollout(SerialVectorEnv(ENV_ID, 4), 80)
-    vec = RayVectorEnv(ENV_ID, 4, envs_per_worker=2)
+    vec = RayVectorEnv(ENV_ID, 4, envs_per_worker=2, transport=transport)
     parallel = vector_rollout(vec, 80)
     vec.close()
     assert any(step[2].any() for step in serial[1:])  # episodes ended and were reset
@@ -182,14 +183,15 @@ def test_ray_matches_serial_bit_for_bit(chrono, ray_cluster):
             np.testing.assert_array_equal(a, b)
 
 
-def test_sigkilled_worker_is_replaced(chrono, ray_cluster):
+@pytest.mark.parametrize("transport", ["socket", "fork"])
+def test_sigkilled_worker_is_replaced(chrono, ray_cluster, transport):
     def kill(t, vec):
         if t == 10:
             os.kill(vec.worker_pids()[1], signal.SIGKILL)
             time.sleep(0.3)
 
     undisturbed = vector_rollout(SerialVectorEnv(ENV_ID, 4), 30)
-    vec = RayVectorEnv(ENV_ID, 4, envs_per_worker=2)
+    vec = RayVectorEnv(ENV_ID, 4, envs_per_worker=2, transport=transport)
     old = vec.worker_pids()
     run = vector_rollout(vec, 30, kill=kill)
     assert vec.worker_pids()[0] == old[0] and vec.worker_pids()[1] != old[1]

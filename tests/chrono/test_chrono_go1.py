@@ -107,7 +107,8 @@ def test_reset_forgets_the_contacts_of_earlier_episodes(chrono):
     fresh.close()
 
 
-def test_ray_matches_gymnasium_sync_vector_env_bit_for_bit(chrono, ray_cluster):
+@pytest.mark.parametrize("transport", ["socket", "fork"])
+def test_ray_matches_gymnasium_sync_vector_env_bit_for_bit(chrono, ray_cluster, transport):
     def run(vec) -> list[np.ndarray]:
         rng = np.random.default_rng(0)
         out = [vec.reset(seed=11)[0]]
@@ -119,7 +120,7 @@ def test_ray_matches_gymnasium_sync_vector_env_bit_for_bit(chrono, ray_cluster):
         return out
 
     sync = run(gym.vector.SyncVectorEnv([lambda: gym.make(CHRONO_ID)] * 2))
-    ray = run(RayVectorEnv(CHRONO_ID, 2, envs_per_worker=1))
+    ray = run(RayVectorEnv(CHRONO_ID, 2, envs_per_worker=1, transport=transport))
     for got, want in zip(ray, sync, strict=True):
         np.testing.assert_array_equal(got, want)
 
