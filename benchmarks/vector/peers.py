@@ -6,8 +6,10 @@ Backends: chronogym's SerialVectorEnv and RayVectorEnv (default settings, plus a
 first half that is ready and only those envs get their next actions). Every vector env uses
 Gymnasium's NEXT_STEP autoreset, as EnvPool does. Workloads: ``Ant-v5`` (Gymnasium MuJoCo),
 ``chronogym/Go1Velocity-v0`` and ``chronogym/CartPole-v0`` at ``k=10`` (cheap steps; endless
-episodes, so every step costs the same physics). EnvPool runs only the Gymnasium tasks it ships
-(Ant-v5); the rest, and every EnvPool row where envpool is not installed, are skipped with a note.
+episodes, so every step costs the same physics); with PyChrono, ``--workloads
+chronogym/ChronoGo1Velocity-v0`` (the Go1 in Project Chrono). EnvPool runs only the Gymnasium
+tasks it ships (Ant-v5); the rest, and every EnvPool row where envpool is not installed, are
+skipped with a note.
 
     python -m benchmarks.vector.peers           # full run, about 4 min on 2 quiet cores
     python -m benchmarks.vector.peers --quick   # smoke run: a few steps, one repeat
@@ -88,8 +90,11 @@ WORKLOADS = {
         Workload("Ant-v5", "Ant-v5"),
         Workload("chronogym/Go1Velocity-v0", "chronogym/Go1Velocity-v0"),
         Workload("chronogym/CartPole-v0", "chronogym/CartPole-v0", {"k": 10, "terminate": False}),
+        Workload("chronogym/ChronoGo1Velocity-v0", "chronogym/ChronoGo1Velocity-v0"),
     )
 }
+#: Run unless ``--workloads`` names others: the MuJoCo ones (PyChrono is a conda install).
+DEFAULT_WORKLOADS = [name for name in WORKLOADS if "Chrono" not in name]
 
 
 @dataclass(frozen=True)
@@ -146,7 +151,13 @@ def parse_ray_config(text: str) -> dict[str, Any]:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Command-line options; ``--quick`` shrinks the run to a smoke test."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--workloads", nargs="+", choices=tuple(WORKLOADS), default=list(WORKLOADS))
+    parser.add_argument(
+        "--workloads",
+        nargs="+",
+        choices=tuple(WORKLOADS),
+        default=DEFAULT_WORKLOADS,
+        help="default: the MuJoCo ones (chronogym/ChronoGo1Velocity-v0 needs PyChrono)",
+    )
     parser.add_argument("--num-envs", type=positive_int, default=16, help="envs per vector env")
     parser.add_argument("--steps", type=positive_int, default=1000, help="timed vector steps")
     parser.add_argument("--warmup", type=non_negative_int, default=50, help="untimed vector steps")
