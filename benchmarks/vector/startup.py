@@ -2,8 +2,9 @@
 the first ``reset()`` returning, and from ``close()`` to its return, cold (first in the
 process: Ray not yet initialised, so the env starts a local cluster; for ``fork``, the
 zygote's first start) and warm (``--warm`` more, median), for W workers of
-chronogym/CartPole-v0 (one env per worker). Each transport and W runs in a fresh child
-process, which also times ``import chronogym`` plus Ray and the final ``ray.shutdown()``.
+chronogym/CartPole-v0 (``--env``: another id) with one env per worker. Each transport and W
+runs in a fresh child process, which also times ``import chronogym`` plus Ray and the final
+``ray.shutdown()``.
 
 Transports: ``socket`` (the default; Ray actors), ``actor``, ``fork`` (workers forked from a
 warm zygote, no Ray), and ``ray_bare``: W Ray actors of an empty class to their first call,
@@ -101,11 +102,11 @@ COLUMNS = (
 )
 
 
-def measure(transport: str, workers: int, warm: int) -> dict:
-    """One child process for ``transport`` and ``workers``: its phase times, warm ones as
-    medians."""
+def measure(transport: str, workers: int, warm: int, env_id: str = ENV_ID) -> dict:
+    """One child process for ``transport`` and ``workers`` of ``env_id``: its phase times,
+    warm ones as medians."""
     run = subprocess.run(
-        [sys.executable, "-c", CHILD, ENV_ID, str(workers), str(warm), transport],
+        [sys.executable, "-c", CHILD, env_id, str(workers), str(warm), transport],
         capture_output=True,
         text=True,
         env=child_env(),
@@ -133,15 +134,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--transports", nargs="+", choices=TRANSPORTS, default=["socket", "fork"])
     parser.add_argument("--warm", type=int, default=3, help="warm starts per W (median shown)")
+    parser.add_argument("--env", default=ENV_ID, help=f"the env id (default {ENV_ID})")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     record = header("vector/startup")
     record["settings"] = settings(args)
-    record["env_id"] = ENV_ID
+    record["env_id"] = args.env
     rows = []
     for workers in args.workers:
         for transport in args.transports:
-            rows.append(measure(transport, workers, args.warm))
+            rows.append(measure(transport, workers, args.warm, args.env))
             shown = table(COLUMNS, rows[-1:])
             print(shown.splitlines()[-1] if len(rows) > 1 else shown, flush=True)
     record["rows"] = rows
