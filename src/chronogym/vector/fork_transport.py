@@ -72,8 +72,8 @@ def check_fork_arguments(**given: Any) -> None:
         if name in ray_only and value != ray_only[name]:
             raise ValueError(
                 f"{name}={value!r} with transport='fork': forked workers are not Ray actors "
-                "(nothing is reserved for them; they run at the driver's priority, spread over "
-                "the nodes by their CPUs); expected "
+                "(nothing is reserved for them, they are spread over the nodes by their CPUs "
+                "and run at their parent's priority); expected "
                 f"{name}={ray_only[name]!r} (or a Ray transport, 'socket' or 'actor')"
             )
 
@@ -204,7 +204,13 @@ class ForkBackend(SocketBackend):
         self._nodes = [None] * workers
         if self.cluster:
             here = self._ray.get_runtime_context().get_node_id()
-            placed = spread_by_cpus(workers, cluster_nodes())
+            nodes = cluster_nodes()
+            if not nodes:
+                raise RuntimeError(
+                    "transport='fork': no live node of the Ray cluster offers CPUs for the "
+                    "workers (ray.nodes(); a node started with --num-cpus=0 gets none)"
+                )
+            placed = spread_by_cpus(workers, nodes)
             self._nodes = [None if node == here else node for node in placed]
             accept_timeout = self.start_timeout or START_TIMEOUT_S
             self._relays = Relays(self.spin_us, self.step_timeout, accept_timeout)
@@ -255,7 +261,8 @@ class ForkBackend(SocketBackend):
         return True
 
     def _kill(self, w: int) -> None:
-        pid, node = self._pids[w], self._nodes[w] if w < len(self._nodes) else None
+        pid = self._pids[w]
+        node = self._nodes[w] if w < len(self._nodes) else None
         if node is not None:  # its node's relay forked it
             relay = self._relays.by_node.get(node) if self._relays is not None else None
             if relay is not None:
