@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from typing import Any
 
 from chronogym.testing import LocalCluster
 
@@ -25,10 +26,11 @@ def without_session_ray() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def driving(workers: int, num_cpus: int) -> Iterator[LocalCluster]:
-    """A head and ``workers`` worker nodes of ``num_cpus`` CPUs each, this process their
-    driver (connected) for the block."""
-    with without_session_ray(), LocalCluster(workers=workers, num_cpus=num_cpus) as local:
+def driving(workers: int, num_cpus: int, **options: Any) -> Iterator[LocalCluster]:
+    """A head and ``workers`` worker nodes of ``num_cpus`` CPUs each (``options``: more of
+    LocalCluster's), this process their driver (connected) for the block."""
+    cluster = LocalCluster(workers=workers, num_cpus=num_cpus, **options)
+    with without_session_ray(), cluster as local:
         local.connect()
         try:
             yield local

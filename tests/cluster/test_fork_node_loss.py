@@ -1,5 +1,6 @@
-"""A node lost under forked workers (``transport="fork"`` on a real 2-node loopback Ray
-cluster): its workers are reported truncated and forked again on a live node."""
+"""Forked workers (``transport="fork"``) on real loopback Ray clusters of their own: a node
+lost under them (its workers are reported truncated and forked again on a live node), and a
+cluster with no CPUs for them."""
 
 from __future__ import annotations
 
@@ -55,3 +56,11 @@ def test_forked_workers_of_a_lost_node_are_forked_again_on_a_live_one(cluster):
         assert time.perf_counter() - start < 90
     finally:
         vec.close()
+
+
+def test_a_cluster_without_cpus_for_forked_workers_is_a_clear_error():
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+
+    nothing_here = pytest.raises(RuntimeError, match="no live node of the Ray cluster offers CPUs")
+    with driving(workers=0, num_cpus=1, head_cpus=0) as cluster, nothing_here:
+        RayVectorEnv("chronogym/Synthetic-v0", 2, transport="fork", address=cluster.address)

@@ -407,6 +407,22 @@ def test_batch_mode_with_workers_on_other_nodes_matches_sync(cluster, transport)
             assert data_equivalence(got, want, exact=True), f"env {i} differs at step {t}"
 
 
+def test_bench_sizes_forked_workers_on_the_cluster(cluster):
+    from chronogym.sizing import format_report, run_bench
+
+    report = run_bench(
+        "chronogym/CartPole-v0",
+        seconds=0.2,
+        max_workers=3,
+        address=cluster.address,
+        transport="fork",
+        log=lambda *_: None,
+    )
+    assert report.cpus == 3 and report.where == "the cluster"
+    assert [run.workers for run in report.runs][:2] == [1, 2] and report.check is not None
+    assert "the cluster has 3 CPUs" in format_report(report)
+
+
 def test_workers_group_by_node_with_their_rows():
     from chronogym.vector.spread_step import HERE, by_node
 
