@@ -9,10 +9,12 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from local_clusters import driving
 
 from chronogym import RayVectorEnv
 from chronogym.engines.mujoco import gl_unavailable
 from chronogym.tasks.quadruped import DEFAULT_JOINT_POS, HOME_BASE_HEIGHT
+from chronogym.testing import ray_start_available
 
 CHRONO_ID = "chronogym/ChronoGo1Velocity-v0"
 MUJOCO_ID = "chronogym/Go1Velocity-v0"
@@ -122,6 +124,32 @@ def test_ray_matches_gymnasium_sync_vector_env_bit_for_bit(chrono, ray_cluster, 
     sync = run(gym.vector.SyncVectorEnv([lambda: gym.make(CHRONO_ID)] * 2))
     ray = run(RayVectorEnv(CHRONO_ID, 2, envs_per_worker=1, transport=transport))
     for got, want in zip(ray, sync, strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.skipif(ray_start_available() is not None, reason="`ray start` unavailable")
+def test_forked_workers_on_a_cluster_match_gymnasium_sync(chrono):
+    """transport="fork" on a 2-node loopback cluster: the other node's relay forks its Chrono
+    workers there; the same numbers as SyncVectorEnv."""
+
+    def run(vec) -> list[np.ndarray]:
+        rng = np.random.default_rng(0)
+        out = [vec.reset(seed=11)[0]]
+        for _ in range(15):
+            obs, rewards, terminated, truncated, _ = vec.step(
+                rng.normal(size=(4, 12)).astype(np.float32)
+            )
+            out += [obs, rewards, terminated, truncated]
+        vec.close()
+        return out
+
+    with driving(workers=1, num_cpus=1) as cluster:
+        address = cluster.address
+        vec = RayVectorEnv(CHRONO_ID, 4, envs_per_worker=1, transport="fork", address=address)
+        assert vec._backend.relayed() == [False, False, True, True]
+        forked = run(vec)
+    sync = run(gym.vector.SyncVectorEnv([lambda: gym.make(CHRONO_ID)] * 4))
+    for got, want in zip(forked, sync, strict=True):
         np.testing.assert_array_equal(got, want)
 
 
