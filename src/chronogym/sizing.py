@@ -326,7 +326,7 @@ def run_bench(
     ``transport`` (None: its default); ``log`` gets progress."""
     from chronogym.ray_runtime import cluster_cpus, ensure_ray
     from chronogym.validation import check_bool, check_int, check_number, check_positive
-    from chronogym.vector.fork_transport import forks_here_only
+    from chronogym.vector.fork_placement import forks_here_only
     from chronogym.vector.ray_vector_env import check_transport
     from chronogym.vector.shared_step import usable_cpus
 

@@ -204,7 +204,7 @@ def test_ray_arguments_are_rejected_by_name(name, value):
 
 
 def test_workers_spread_over_nodes_by_their_cpus():
-    from chronogym.vector.fork_transport import spread_by_cpus
+    from chronogym.vector.fork_placement import spread_by_cpus
 
     assert spread_by_cpus(6, {"a": 1, "b": 1, "c": 1}) == ["a", "a", "b", "b", "c", "c"]
     assert spread_by_cpus(5, {"a": 1, "b": 2, "c": 2}) == ["a", "b", "b", "c", "c"]

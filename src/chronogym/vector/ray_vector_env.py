@@ -27,12 +27,8 @@ from chronogym.vector.checks import normalize_env_fns
 from chronogym.vector.driver_registry import DriverRegistry, script_registered_ids
 from chronogym.vector.driver_worker import DriverWorkerBackend
 from chronogym.vector.env_errors import check_env_errors
-from chronogym.vector.fork_transport import (
-    ForkBackend,
-    check_fork_arguments,
-    forks_here_only,
-    preload_modules,
-)
+from chronogym.vector.fork_placement import check_fork_arguments, forks_here_only
+from chronogym.vector.fork_transport import ForkBackend, preload_modules
 from chronogym.vector.shared_step import usable_cpus
 from chronogym.vector.socket_transport import SocketBackend, check_spin_us
 from chronogym.vector.worker_vector_env import WorkerVectorEnv
