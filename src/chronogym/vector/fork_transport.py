@@ -41,7 +41,7 @@ from gymnasium.envs.registration import EnvSpec
 from chronogym.vector.actor_transport import ActorGroup
 from chronogym.vector.backend import Outcome
 from chronogym.vector.fork_placement import cluster_nodes, spread_by_cpus
-from chronogym.vector.fork_zygote import Zygote, fork_worker, running
+from chronogym.vector.fork_zygote import Zygote, fork_worker, how_ended
 from chronogym.vector.relay import Relays
 from chronogym.vector.relay_channel import ANSWERED
 from chronogym.vector.socket_transport import (
@@ -54,7 +54,7 @@ from chronogym.vector.socket_transport import (
     poller_of,
     serve_listener,
 )
-from chronogym.vector.wire_format import CALL, CALL_ANSWER, REQUEST, fill
+from chronogym.vector.wire_format import CALL, CALL_ANSWER, REQUEST, read_call_answer
 
 ENTRY = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")  # "module:attr", as an entry point
 START_TIMEOUT_S = 120.0  # start_timeout=None: still give up on a worker that never listens
@@ -336,14 +336,9 @@ class ForkBackend(SocketBackend):
         pid, node = self._pids[w], self._nodes[w]
         if node is not None:
             return self._death_elsewhere(w, node)
-        ended = None
-        if self._zygote is not None and pid is not None:
-            with contextlib.suppress(OSError, EOFError):
-                ended = self._zygote.ending(pid, DEATH_PROBE_S)
+        ended = None if pid is None else how_ended(self._zygote, pid, DEATH_PROBE_S)
         if ended is not None:
             return f"the worker process (pid {pid}) {ended}"
-        if pid is not None and not running(pid):
-            return f"the worker process (pid {pid}) ended; its parent, an earlier zygote, is gone"
         return f"the worker process (pid {pid}) is alive but closed its socket"
 
     def _death_elsewhere(self, w: int, node: str) -> str:
@@ -414,9 +409,4 @@ class ForkBackend(SocketBackend):
             raise EOFError(f"worker {w}'s socket was closed before its answer came")
         if deadline is not None:
             sock.settimeout(max(deadline - time.monotonic(), 1e-3))
-        head = memoryview(bytearray(CALL_ANSWER.size))
-        fill(sock, head, 0, CALL_ANSWER.size)
-        (size,) = CALL_ANSWER.unpack(head)
-        body = memoryview(bytearray(size))
-        fill(sock, body, 0, size)
-        return pickle.loads(body)  # trusted: own worker (a private socket)
+        return self._call_outcome(read_call_answer(sock))

@@ -162,6 +162,18 @@ def running(pid: int) -> bool:
         return not os.path.isdir("/proc") or os.path.exists(f"/proc/{pid}")
 
 
+def how_ended(zygote: Zygote | None, pid: int, wait_s: float) -> str | None:
+    """How worker ``pid`` ended, as ``zygote`` (its parent) saw it within ``wait_s``; for
+    an orphan of an earlier zygote, only that it ended; None while it runs."""
+    ended = None
+    if zygote is not None:
+        with contextlib.suppress(OSError, EOFError):
+            ended = zygote.ending(pid, wait_s)
+    if ended is None and not running(pid):
+        return "ended; its parent, an earlier zygote, is gone"
+    return ended
+
+
 # -- zygote side ------------------------------------------------------------------------------
 def main(fd: int) -> None:
     """Serve the driver's requests on line ``fd`` until it closes it."""

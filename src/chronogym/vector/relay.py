@@ -55,6 +55,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from chronogym.vector.fork_zygote import fork_worker, how_ended
 from chronogym.vector.relay_channel import (
     ANSWERED,
     LOST,
@@ -64,7 +65,7 @@ from chronogym.vector.relay_channel import (
     SharedRows,
 )
 from chronogym.vector.shared_step import SharedLayout, SharedStep
-from chronogym.vector.wire_format import ANSWER, CALL, CALL_ANSWER, REQUEST, fill
+from chronogym.vector.wire_format import ANSWER, CALL, REQUEST, fill, read_call_answer
 
 T = TypeVar("T")
 FORK_DEATH_PROBE_S = 2.0  # how long a relay waits to learn how a forked worker that hung up ended
@@ -160,8 +161,10 @@ class NodeRelay:
                 answers.append(failed[worker])
                 continue
             try:
-                read = self._read_call if kind == CALL else self._read
-                answers.append((worker, ANSWERED, read(worker)))
+                if kind == CALL:  # a forked worker's call: its answer as it wrote it
+                    answers.append((worker, ANSWERED, read_call_answer(self.socks[worker])))
+                else:
+                    answers.append((worker, ANSWERED, self._read(worker)))
             except (OSError, EOFError) as error:
                 answers.append(self._failed(worker, error))
         return answers
@@ -175,8 +178,6 @@ class NodeRelay:
         the first fork, ``modules`` imported once), connect to it, and ask it ``ready``
         (its envs built, within ``accept_timeout``): per worker, its pid (None if it never
         started) and the ready call's answer, as :meth:`step` gives it."""
-        from chronogym.vector.fork_zygote import fork_worker
-
         started: dict[int, tuple[int, str]] = {}
         replies: dict[int, tuple[int, int | None, RelayAnswer]] = {}
         for worker, payload in requests:
@@ -219,20 +220,10 @@ class NodeRelay:
 
     @locked
     def ending(self, worker: int, wait_s: float) -> str | None:
-        """How forked worker ``worker``'s process ended, as its zygote saw it (None: it
-        runs, or an earlier zygote forked it and it is gone: then says so)."""
-        from chronogym.vector.fork_zygote import running
-
+        """How forked worker ``worker``'s process ended (None: it runs), as
+        :func:`~chronogym.vector.fork_zygote.how_ended` says."""
         pid = self.forked.get(worker)
-        if pid is None:
-            return None
-        ended = None
-        if self.zygote is not None:
-            with contextlib.suppress(OSError, EOFError):
-                ended = self.zygote.ending(pid, wait_s)
-        if ended is None and not running(pid):
-            return "ended; its parent, an earlier zygote, is gone"
-        return ended
+        return None if pid is None else how_ended(self.zygote, pid, wait_s)
 
     @locked
     def kill(self, worker: int) -> None:
@@ -335,16 +326,6 @@ class NodeRelay:
             view = memoryview(bigger)
         fill(sock, view, got, total)
         return bytes(view[:total])
-
-    def _read_call(self, worker: int) -> bytes:
-        """A forked worker's answer to a call: its length, then its pickled Outcome."""
-        sock = self.socks[worker]
-        head = bytearray(CALL_ANSWER.size)
-        fill(sock, memoryview(head), 0, CALL_ANSWER.size)
-        (size,) = CALL_ANSWER.unpack(head)
-        body = bytearray(size)
-        fill(sock, memoryview(body), 0, size)
-        return bytes(head + body)
 
     def _failed(self, worker: int, error: BaseException) -> RelayAnswer:
         self.disconnect(worker)

@@ -664,11 +664,11 @@ class SocketBackend(ActorBackend):
     def _relayed_outcome(self, w: int, relayed: tuple[str, Any], kind: int = 0) -> Outcome:
         """Worker ``w``'s (status, value) from its relay, as if read from its socket here
         (``kind``: the request's; a step's here)."""
-        kind, value = relayed
-        if kind == ANSWERED:
+        relay_status, value = relayed
+        if relay_status == ANSWERED:
             status, *sizes = ANSWER.unpack_from(value)
             return decode_answer(status, sizes, memoryview(value))
-        return self._lost_relayed(w, value, silent=kind == SILENT)
+        return self._lost_relayed(w, value, silent=relay_status == SILENT)
 
     def _lost_relayed(self, w: int, why: str, silent: bool) -> Outcome:
         """A relayed worker's step failed: the worker is lost (with Ray's reason, unless it is

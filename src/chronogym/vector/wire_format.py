@@ -87,6 +87,17 @@ def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
     return got
 
 
+def read_call_answer(sock: socket.socket) -> bytes:
+    """A call's answer as :func:`answer_call` wrote it (its length, then its pickled
+    Outcome), read whole from ``sock``; EOFError when the peer closes first."""
+    head = bytearray(CALL_ANSWER.size)
+    fill(sock, memoryview(head), 0, CALL_ANSWER.size)
+    (size,) = CALL_ANSWER.unpack(head)
+    answer = head + bytearray(size)
+    fill(sock, memoryview(answer), CALL_ANSWER.size, len(answer))
+    return bytes(answer)
+
+
 def answer_call(group: Any, request: bytes) -> bytes:
     """Run the pickled ``(method, args)`` on ``group``; its Outcome as an answer message.
     An exception is the Outcome an in-process call gives (:func:`error_outcome`); an answer
