@@ -137,6 +137,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--env", default=ENV_ID, help=f"the env id (default {ENV_ID})")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
+    import gymnasium as gym
+
+    import chronogym  # noqa: F401  (registers chronogym's ids)
+
+    try:  # in this process, not first in a child's traceback
+        gym.spec(args.env)
+    except gym.error.Error as error:
+        parser.error(f"--env {args.env!r}: not a registered env id ({error})")
     record = header("vector/startup")
     record["settings"] = settings(args)
     record["env_id"] = args.env
