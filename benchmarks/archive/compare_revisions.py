@@ -34,6 +34,18 @@ SHAPES = [
     ("go1 serial 16", "chronogym/Go1Velocity-v0", {}, 16, "serial", {}),
     ("go1 ray-sock 2x8", "chronogym/Go1Velocity-v0", {}, 16, "ray", {"envs_per_worker": 8}),
 ]  # fmt: skip
+#: Tasks that report infos at every step (Ant-v5: nine scalars), one env per worker as on a
+#: machine with a core per worker, forked workers and Ray's.
+INFO_SHAPES = [
+    ("ant fork 1x1", "Ant-v5", {}, 1, "ray", {"envs_per_worker": 1, "transport": "fork"}),
+    ("ant fork 4x1", "Ant-v5", {}, 4, "ray", {"envs_per_worker": 1, "transport": "fork"}),
+    ("ant fork 8x1", "Ant-v5", {}, 8, "ray", {"envs_per_worker": 1, "transport": "fork"}),
+    ("ant ray-sock 4x1", "Ant-v5", {}, 4, "ray", {"envs_per_worker": 1}),
+    ("ant fork 2x8", "Ant-v5", {}, 16, "ray", {"envs_per_worker": 8, "transport": "fork"}),
+    ("go1 fork 4x1", "chronogym/Go1Velocity-v0", {}, 4, "ray",
+     {"envs_per_worker": 1, "transport": "fork"}),
+]  # fmt: skip
+SHAPE_SETS = {"default": SHAPES, "infos": INFO_SHAPES}
 
 # Runs inside the subprocess: step one shape with random actions, print env-steps/s as JSON.
 MEASURE = r"""
@@ -93,17 +105,21 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--head", default="HEAD", help="the revision under test")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=4.0, help="stepping time per sample")
+    parser.add_argument(
+        "--shapes", choices=tuple(SHAPE_SETS), default="default", help="which set of shapes"
+    )
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args(argv)
+    shapes = SHAPE_SETS[args.shapes]
     if args.rounds < 1 or args.seconds <= 0:
         parser.error(f"--rounds={args.rounds} / --seconds={args.seconds}: expected >= 1 / > 0")
     revs = {name: rev for name, rev in (("base", args.base), ("head", args.head))}
-    rates: dict[str, dict[str, list[float]]] = {s[0]: {"base": [], "head": []} for s in SHAPES}
+    rates: dict[str, dict[str, list[float]]] = {s[0]: {"base": [], "head": []} for s in shapes}
     with tempfile.TemporaryDirectory(prefix="chronogym-revs-") as tmp:
         srcs = {name: checkout(rev, Path(tmp) / name) for name, rev in revs.items()}
         try:
             for r in range(args.rounds):
-                for shape in SHAPES:
+                for shape in shapes:
                     order = ("base", "head") if r % 2 == 0 else ("head", "base")
                     for name in order:
                         rates[shape[0]][name].append(
@@ -143,6 +159,7 @@ def main(argv: list[str] | None = None) -> None:
         "revisions": commits,
         "rounds": args.rounds,
         "seconds": args.seconds,
+        "shapes": args.shapes,
         "rows": rows,
     }
     write_json(args.out, record, note=f" (env-steps/s, medians of {args.rounds} rounds)")

@@ -106,6 +106,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
+import importlib.util
 import os
 import statistics
 import sys
@@ -158,6 +159,7 @@ PREDICT_AT = (64, 256)
 STRAGGLER_CVS = (0.0, 0.25, 0.5)
 STRAGGLER_STEP_MS = 10.0
 STRAGGLER_PATHS = ("socket", "fork")  # transports --straggler-paths may name
+RAY_FREE_PATHS = ("fork", "async")  # the paths that run where Ray is not installed
 RAY_SETTLE_S = 2.0
 
 
@@ -227,7 +229,23 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     if args.with_128 and 128 not in args.workers:
         args.workers.append(128)
     args.workers = sorted(set(args.workers))
+    ray_paths = ray_paths_of(args)
+    if ray_paths and importlib.util.find_spec("ray") is None:
+        parser.error(
+            f"paths {', '.join(ray_paths)} need Ray, which is not importable here; "
+            f"expected only {' and '.join(RAY_FREE_PATHS)} (--paths, --straggler-paths or "
+            "--no-stragglers), without --multinode"
+        )
     return args
+
+
+def ray_paths_of(args: argparse.Namespace, multinode: bool = True) -> list[str]:
+    """The paths of this run that need Ray: every one but fork and async, and with
+    ``multinode`` the multi-node ones (their cluster is Ray's)."""
+    stragglers = [] if args.no_stragglers else args.straggler_paths
+    extra = args.multinode_paths if multinode and args.multinode else []
+    paths = [*args.paths, *stragglers, *extra]
+    return [p for p in dict.fromkeys(paths) if p not in RAY_FREE_PATHS]
 
 
 # -- building the vector envs -----------------------------------------------------------------
@@ -837,8 +855,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.other_cpus:  # everything started from here on inherits the other cores
         os.sched_setaffinity(0, args.other_cpus)
     wall = time.perf_counter()
-    import ray
-
+    local_ray = bool(ray_paths_of(args, multinode=False))
     runs: list[dict[str, Any]] = []
     starts: list[dict[str, Any]] = []
     failures: list[dict[str, Any]] = []
@@ -846,7 +863,8 @@ def main(argv: list[str] | None = None) -> int:
     record["sleep_ms"] = sleep_calibration(args.step_ms, min(args.seconds, 1.0))
     print(f"sleep calibration (ms per step, in process): {record['sleep_ms']}")
     straggler_rows: list[dict[str, Any]] = []
-    start_ray(args.ray_cpus)
+    if local_ray:
+        start_ray(args.ray_cpus)
     try:
         prime(args.paths, args, None)
         sweep(args.paths, args, None, runs, starts, failures)
@@ -854,7 +872,10 @@ def main(argv: list[str] | None = None) -> int:
             print("stragglers:")
             straggler_rows = stragglers(args)
     finally:
-        ray.shutdown()
+        if local_ray:
+            import ray
+
+            ray.shutdown()
     if args.multinode:
         print(f"multinode: {args.nodes} worker nodes of {args.ray_cpus} CPUs, head without")
         try:

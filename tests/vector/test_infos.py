@@ -84,3 +84,28 @@ def test_empty_infos_are_none():
         False,
         True,
     ]
+
+
+@pytest.mark.parametrize("transport", ["socket", "fork"])
+def test_infos_of_the_other_workers_survive_a_lost_one(ray_cluster, transport):
+    """A step where one worker is lost (its envs truncated) and the others only add infos to
+    their rows: their infos are in the step's vector info beside the lost worker's."""
+    import os
+    import signal
+    import time
+
+    vec = RayVectorEnv(info_env_fns("scalars", NUM_ENVS), envs_per_worker=2, transport=transport)
+    try:
+        vec.reset(seed=0)
+        actions = np.zeros((NUM_ENVS, 1), np.float32)
+        _, _, _, _, before = vec.step(actions)
+        assert before["_t"].all() and before["t"].tolist() == [1, 1, 1, 1]
+        os.kill(vec.worker_pids()[1], signal.SIGKILL)
+        time.sleep(0.3)
+        _, _, _, truncated, info = vec.step(actions)
+        assert truncated.tolist() == [False, False, True, True]
+        assert info["_t"].tolist() == [True, True, False, False]
+        assert info["t"][:2].tolist() == [2, 2]
+        assert info["worker_restarted"][2:].all()
+    finally:
+        vec.close()

@@ -35,7 +35,11 @@ block's writes before it), so it holds on any CPU, not just x86.
 A worker's answer that carries anything besides its rows (infos, restarts, an env's
 error) is written whole, in :mod:`chronogym.vector.wire_format`'s answer format, to
 the worker's *tail* slot in the block (status ``IN_TAIL``), or sent on its socket when
-it does not fit (``ON_SOCKET``). A worker that dies shows as a hung-up socket, one
+it does not fit (``ON_SOCKET``). A tail that adds only infos to the worker's rows (every
+Gymnasium MuJoCo task reports infos at every step) keeps the step on the whole-batch path:
+the driver takes the rows from the block and joins the infos alone, with no per-worker
+answer to build (``split_infos``; 40-80 µs less of the driver's CPU per worker and step with
+Ant-v5's nine infos on a 2-core VM). A worker that dies shows as a hung-up socket, one
 silent past ``step_timeout`` as lost: both are replaced by the socket transport as
 before. The same :class:`~chronogym.vector.group.EnvGroup` call
 (``step_packed``) makes the bytes either way, so the numbers are the socket path's.
@@ -58,7 +62,13 @@ from typing import Any
 import numpy as np
 
 from chronogym.vector.backend import Outcome, StepAnswer
-from chronogym.vector.wire_format import ANSWER, REQUEST, decode_answer, encode_answer
+from chronogym.vector.wire_format import (
+    ANSWER,
+    REQUEST,
+    decode_answer,
+    encode_answer,
+    infos_only,
+)
 
 ATTACH = 2  # REQUEST's flag byte: attach to a shared step (0 and 1: a step over the socket)
 PLAIN, IN_TAIL, ON_SOCKET = 0, 1, 2  # a worker's status word after a shared step
@@ -193,6 +203,8 @@ class SharedAnswers:
     truncations: np.ndarray
     extras: dict[int, Any]  # worker -> its full answer (infos, restarts, error, loss): an
     # Outcome on the driver, a RelayAnswer in a relay
+    infos: dict[int, Any] = field(default_factory=dict)  # worker -> its infos, where they
+    # were all it had to add to its rows (``split_infos``)
 
     def outcome(self, w: int, lo: int, hi: int) -> Outcome:
         """Worker ``w``'s answer as the socket path gives it (rows ``lo:hi``)."""
@@ -203,7 +215,7 @@ class SharedAnswers:
             self.rewards[lo:hi].tobytes(),
             self.terminations[lo:hi].tobytes(),
             self.truncations[lo:hi].tobytes(),
-            None,
+            self.infos.get(w),
             None,
         )
         return Outcome(True, answer)
@@ -288,11 +300,14 @@ class SharedStep:
         lost: Any,
         read: Any,
         decode: Any = None,
+        split_infos: bool = False,
     ) -> SharedAnswers:
         """One barrier step of every worker. ``lost(w, error)`` gives a lost worker's Outcome;
         ``read(w, deadline)`` reads an answer sent on worker ``w``'s socket; ``decode(w,
         view)`` an answer found in worker ``w``'s tail slot (default: its Outcome; a relay
-        keeps the raw bytes)."""
+        keeps the raw bytes). ``split_infos``: a tail that adds only infos to the worker's
+        rows (the common case: every Gymnasium MuJoCo task reports infos at every step) goes
+        to ``infos``, not ``extras``, so the caller keeps the whole-batch rows."""
         v = self.views
         g = self.gen = self.gen + 1
         v.actions[:] = np.frombuffer(actions, np.uint8)
@@ -316,6 +331,9 @@ class SharedStep:
                     extras[w] = decode(w, view)
                     continue
                 head, *sizes = ANSWER.unpack_from(view)
+                if split_infos and (infos := infos_only(head, sizes, view)) is not None:
+                    answers.infos[w] = infos
+                    continue
                 extras[w] = decode_answer(head, sizes, view)
             else:
                 try:
@@ -444,7 +462,10 @@ class SharedServer:
 
     def _counted_last(self, g: int) -> bool:
         """Count this answer to step ``g`` (under a lock on the block: the workers are
-        separate processes); is it the last one, which wakes the driver?"""
+        separate processes); is it the last one, which wakes the driver? A block's only
+        worker is the last without counting (no lock: two system calls less per step)."""
+        if len(self.layout.slices) == 1:
+            return True
         count = self.views.count
         fcntl.lockf(self._mem_fd, fcntl.LOCK_EX, 1)
         try:

@@ -456,7 +456,9 @@ class SocketBackend(ActorBackend):
             return None
         assert self._shared is not None
         deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
-        return self._shared.step(actions, self._socks, deadline, self._lost, self._read)
+        return self._shared.step(
+            actions, self._socks, deadline, self._lost, self._read, split_infos=True
+        )
 
     def shares_steps(self) -> bool:
         """Can the barrier step go through shared memory (on, and every worker connected

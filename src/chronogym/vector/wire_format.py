@@ -76,6 +76,17 @@ def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
     return Outcome(True, answer)
 
 
+def infos_only(status: int, sizes: list[int], view: memoryview) -> Any:
+    """The infos of an answer message that adds nothing else to its rows (no restarts,
+    timings or failure); None for any other answer (then :func:`decode_answer`)."""
+    if status != OK or not sizes[4]:
+        return None
+    extra = pickle.loads(view[ANSWER.size + sum(sizes[:4]) :])  # trusted: own worker
+    if len(extra) != 2 or extra[1] is not None:
+        return None
+    return extra[0]
+
+
 def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
     """Read into ``view`` from ``got`` until at least ``need`` bytes are in; the count.
     EOFError when the peer closes first (both ends use it)."""
