@@ -195,6 +195,28 @@ def save_figure(fig: Any, path: Path, dpi: int = 110) -> None:
     plt.close(fig)
 
 
+def error_text(error: BaseException) -> str:
+    """``Type: message`` of an exception, for a table's note or a failure record."""
+    return f"{type(error).__name__}: {error}".strip()
+
+
+def finish(
+    path: Path, record: dict[str, Any], plot: Callable[[Path], None] | None, failures: list
+) -> int:
+    """The run's end: print its failures, write ``record`` (with its ``seconds_in_all``) and,
+    if ``plot``, the PNG beside it (a figure that fails is a printed note, not the run's
+    failure); the exit status, 1 if anything failed."""
+    for failure in failures:
+        print(f"FAILED {failure['setting']}: {failure['error']}")
+    write_json(path, record, f" ({record['seconds_in_all']:.0f} s in all)")
+    if plot is not None:
+        try:
+            plot(path.with_suffix(".png"))
+        except Exception as error:
+            print(f"no figure: {error_text(error)}")
+    return 1 if failures else 0
+
+
 # -- /proc (Linux) --------------------------------------------------------------------------
 
 

@@ -37,6 +37,7 @@ the JSON (default ``benchmarks/results/cores.json``) and a PNG of E(W) beside it
 from __future__ import annotations
 
 import argparse
+import functools
 import gc
 import importlib.util
 import os
@@ -52,6 +53,8 @@ import numpy as np
 from benchmarks.common import (
     RESULTS,
     Column,
+    error_text,
+    finish,
     header,
     non_negative_int,
     positive_float,
@@ -60,7 +63,6 @@ from benchmarks.common import (
     save_figure,
     settings,
     table,
-    write_json,
 )
 from benchmarks.vector.peers import WORKLOADS, Workload, action_sequence, envpool_tasks
 from chronogym.sizing import fit_line, timed_loop
@@ -215,10 +217,6 @@ def measure(
         "driver_cpu_ms_per_step": 1e3 * timed.cpu_s / timed.steps,
         "env_steps_per_s": timed.steps * num_envs / timed.wall_s,
     }
-
-
-def error_text(error: BaseException) -> str:
-    return f"{type(error).__name__}: {error}".strip()
 
 
 # -- the run --------------------------------------------------------------------------------
@@ -433,15 +431,8 @@ def main(argv: list[str] | None = None) -> int:
             f"  skipped {skip['workload']} {skip['path']} epw {skip['envs_per_worker']}: "
             f"{skip['reason']}"
         )
-    for failure in failures:
-        print(f"FAILED {failure['setting']}: {failure['error']}")
-    write_json(args.out, record, f" ({record['seconds_in_all']:.0f} s in all)")
-    if rows:
-        try:
-            plot(rows, args.out.with_suffix(".png"))
-        except Exception as error:
-            print(f"no figure: {error_text(error)}")
-    return 1 if failures else 0
+    figure = functools.partial(plot, rows) if rows else None
+    return finish(args.out, record, figure, failures)
 
 
 if __name__ == "__main__":

@@ -58,6 +58,7 @@ import chronogym
 from benchmarks.common import (
     RESULTS,
     Column,
+    error_text,
     header,
     non_negative_int,
     positive_int,
@@ -432,10 +433,6 @@ def start_ray() -> None:
     """One local Ray cluster for the whole run (``throughput_timing.start_ray``), settled."""
     start_local_ray()
     time.sleep(RAY_SETTLE_S)
-
-
-def error_text(error: BaseException) -> str:
-    return f"{type(error).__name__}: {error}".strip()
 
 
 def new_entry(backend: Backend) -> dict[str, Any]:

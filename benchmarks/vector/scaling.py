@@ -105,6 +105,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import gc
 import importlib.util
 import os
@@ -122,6 +123,8 @@ import numpy as np
 from benchmarks.common import (
     RESULTS,
     Column,
+    error_text,
+    finish,
     header,
     non_negative_int,
     positive_float,
@@ -130,7 +133,6 @@ from benchmarks.common import (
     save_figure,
     settings,
     table,
-    write_json,
 )
 from benchmarks.vector.throughput_timing import start_ray
 from chronogym.sizing import (
@@ -446,10 +448,6 @@ def ideal_rate(workers: int, epw: int, step_ms: float) -> float:
 
 
 # -- the sweep --------------------------------------------------------------------------------
-
-
-def error_text(error: BaseException) -> str:
-    return f"{type(error).__name__}: {error}".strip()
 
 
 def prime(paths: list[str], args: argparse.Namespace, address: str | None) -> None:
@@ -927,15 +925,8 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(f"stragglers: {STRAGGLER_STEP_MS:g} ms lognormal, env-steps/s")
         print(table(STRAGGLER_COLUMNS, with_none(STRAGGLER_COLUMNS, straggler_rows), rule=True))
-    for failure in failures:
-        print(f"FAILED {failure['setting']}: {failure['error']}")
-    write_json(args.out, record, f" ({record['seconds_in_all']:.0f} s in all)")
-    if runs:
-        try:
-            plot(runs, args.out.with_suffix(".png"))
-        except Exception as error:
-            print(f"no figure: {error_text(error)}")
-    return 1 if failures else 0
+    figure = functools.partial(plot, runs) if runs else None
+    return finish(args.out, record, figure, failures)
 
 
 if __name__ == "__main__":
