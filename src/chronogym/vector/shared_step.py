@@ -345,21 +345,33 @@ class SharedStep:
     def _wait(
         self, g: int, socks: list[socket.socket | None], deadline: float | None, lost: Any
     ) -> dict[int, Outcome]:
-        """Until every worker's ``done`` word holds ``g``; the workers lost meanwhile."""
-        v, lost_now = self.views, {}
+        """Until every worker's ``done`` word holds ``g``; the workers lost meanwhile.
+
+        The done pipe is read only after ``poll`` found it readable (a byte left by a step
+        that ended before its byte came only wakes the next step's wait once), and the done
+        words are scanned for who is missing only when someone was lost or the wait is long.
+        """
+        lost_now: dict[int, Outcome] = {}
+        done = self.views.done
         spinner, checked = self._spinner, time.monotonic()
         spinner.spin(self._done_poll)
+        woken = False
         while True:
-            _drain(self._done_r)
-            missing = np.flatnonzero(v.done != g)
-            if not len(missing) or all(int(w) in lost_now for w in missing):
+            if (done == g).all() or (
+                lost_now and all(int(w) in lost_now for w in np.flatnonzero(done != g))
+            ):
+                if not woken:
+                    _drain(self._done_r)
                 spinner.arrived()
                 return lost_now
             now = time.monotonic()
             wait_s = CHECK_S if deadline is None else min(CHECK_S, max(deadline - now, 0.0))
-            if not self._done_poll.poll(max(1, int(wait_s * 1000))) or now - checked >= CHECK_S:
+            woken = bool(self._done_poll.poll(max(1, int(wait_s * 1000))))
+            if woken:
+                _drain(self._done_r)
+            if not woken or now - checked >= CHECK_S:
                 checked = time.monotonic()
-                for w in missing.tolist():
+                for w in np.flatnonzero(done != g).tolist():
                     if w not in lost_now and (why := self._why_lost(w, socks[w], deadline)):
                         lost_now[w] = lost(w, why)
                         if self.role(w) == LEADER:  # wake its group, as it would have
