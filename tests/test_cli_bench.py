@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from chronogym.sizing import (
@@ -17,7 +18,9 @@ from chronogym.sizing import (
     bench_workers,
     fit_overhead,
     fit_overhead_nonnegative,
+    info_sizes,
     largest_workers,
+    measure_env,
     recommend,
 )
 
@@ -121,3 +124,11 @@ def test_recommendation_is_one_worker_per_core_with_the_fewest_envs():
     assert bench_workers(cpus=2, max_workers=16) == [1, 2, 4]
     assert bench_workers(cpus=32, max_workers=8) == [1, 2, 4, 8]
     assert bench_workers(cpus=6, max_workers=3) == [1, 2, 3]
+
+
+def test_the_synthetic_env_copies_the_envs_info_sizes():
+    assert info_sizes({"a": 1.0, "b": np.float32(2), "c": True, "d": np.zeros((2, 3))}) == (3, 6)
+    assert info_sizes({"text": "x", "obj": object()}) == (0, 0)
+    ant = measure_env("Ant-v5", {}, seconds=0.05)
+    assert (ant.obs_floats, ant.info_scalars, ant.info_floats) == (105, 9, 0)
+    assert ant.synthetic_kwargs["info_scalars"] == 9

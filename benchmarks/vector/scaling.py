@@ -194,6 +194,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--warmup", type=non_negative_int, default=10, help="untimed vector steps")
     parser.add_argument("--obs-dim", type=positive_int, default=16)
     parser.add_argument("--info-floats", type=non_negative_int, default=0)
+    parser.add_argument(
+        "--info-scalars",
+        type=non_negative_int,
+        default=0,
+        help="float64 scalars in each step's info (Ant-v5 reports 9; default 0)",
+    )
     parser.add_argument("--straggler-workers", type=positive_int, default=16)
     parser.add_argument(
         "--straggler-paths",
@@ -270,6 +276,7 @@ def env_kwargs(args: argparse.Namespace, step_ms: float, cv: float = 0.0) -> dic
         "cv": cv,
         "obs_dim": args.obs_dim,
         "info_floats": args.info_floats,
+        "info_scalars": args.info_scalars,
         "max_steps": 1_000_000,  # no truncation inside the timed loops
     }
 

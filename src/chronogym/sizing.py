@@ -18,7 +18,10 @@ measured throughput over the ideal one (every worker computing all the time):
    actions, resets when an episode ends; no Ray).
 2. ``a`` and ``b``: ``RayVectorEnv`` with W = 1, 2, 4 and the cluster's CPU count workers
    (capped by ``--max-workers``), one env each, stepping :class:`SyntheticEnv` whose step
-   *sleeps* ``s`` and whose observation has the env's size. A sleeping step releases its
+   *sleeps* ``s`` and whose observation and info have the env's sizes (its info's numeric
+   scalars as float64 scalars, its other numeric values as one float array: infos cost the
+   driver and the workers Python per step, Gymnasium's MuJoCo tasks nine scalars each). A
+   sleeping step releases its
    core, so W workers measure the vector env's own cost even where W exceeds the cores: the
    real env at W > cores would measure the cores' contention instead. What this leaves out
    is what the workers' real compute does to each other on real cores (memory bandwidth,
@@ -197,12 +200,39 @@ def flat_size(space: Any) -> int:
 
 @dataclass
 class EnvProfile:
-    """The user's env: its step cost (s) and the sizes the synthetic env copies."""
+    """The user's env: its step cost (s) and the sizes the synthetic env copies: the
+    observation's floats, and its step's info as numeric scalars and other floats."""
 
     env_id: str
     step_s: float
     obs_floats: int
     steps: int
+    info_scalars: int = 0
+    info_floats: int = 0
+
+    @property
+    def synthetic_kwargs(self) -> dict[str, Any]:
+        """``SyntheticEnv`` keyword arguments of this env's sizes and step (``step_ms``)."""
+        return {
+            "step_ms": self.step_s * 1000,
+            "obs_dim": self.obs_floats,
+            "info_scalars": self.info_scalars,
+            "info_floats": self.info_floats,
+        }
+
+
+def info_sizes(info: dict[str, Any]) -> tuple[int, int]:
+    """(numeric scalars, floats in every other numeric value) of one step's info; values of
+    other kinds (strings, objects) count as nothing."""
+    import numpy as np
+
+    scalars, floats = 0, 0
+    for value in info.values():
+        if isinstance(value, (bool, int, float, np.number, np.bool_)):
+            scalars += 1
+        elif isinstance(value, np.ndarray) and value.dtype.kind in "biuf":
+            floats += value.size
+    return scalars, floats
 
 
 def measure_env(
@@ -219,16 +249,17 @@ def measure_env(
         sample, step = env.action_space.sample, env.step
         for _ in range(3):  # warm-up: first calls compile, allocate, check
             env.step(sample())
-        steps, busy, start = 0, 0.0, time.perf_counter()
+        steps, busy, start, info = 0, 0.0, time.perf_counter(), {}
         while time.perf_counter() - start < seconds or steps < 5:
             action = sample()
             t0 = time.perf_counter()
-            _, _, terminated, truncated, _ = step(action)
+            _, _, terminated, truncated, info = step(action)
             busy += time.perf_counter() - t0
             steps += 1
             if terminated or truncated:
                 env.reset()
-        return EnvProfile(env_id, busy / steps, flat_size(env.observation_space), steps)
+        obs_floats = flat_size(env.observation_space)
+        return EnvProfile(env_id, busy / steps, obs_floats, steps, *info_sizes(info))
     finally:
         env.close()
 
@@ -340,14 +371,17 @@ def run_bench(
     check_bool("check", check)
     log(f"timing {env_id} serially for {seconds:g} s ...")
     profile = measure_env(env_id, env_kwargs, seconds)
-    log(f"  step: {profile.step_s * 1e3:.3f} ms ({profile.steps} steps)")
+    log(
+        f"  step: {profile.step_s * 1e3:.3f} ms ({profile.steps} steps); info: "
+        f"{profile.info_scalars} scalars, {profile.info_floats} other floats"
+    )
     here_only = transport == "fork" and forks_here_only(address)  # forked here, without Ray
     if here_only:
         cpus = usable_cpus()
     else:
         ensure_ray(address)
         cpus = max(1, int(cluster_cpus()))
-    synthetic = {"step_ms": profile.step_s * 1000, "obs_dim": profile.obs_floats}
+    synthetic = profile.synthetic_kwargs
     report = BenchReport(
         profile, synthetic_step_s(profile.step_s, min(seconds, 1.0)), cpus, cores or cpus, target
     )
@@ -385,7 +419,8 @@ def format_report(report: BenchReport) -> str:
     ms = 1e3
     lines = [
         f"env {report.env.env_id}: step {report.env.step_s * ms:.3f} ms, "
-        f"observation {report.env.obs_floats} floats; "
+        f"observation {report.env.obs_floats} floats, info {report.env.info_scalars} scalars"
+        f" and {report.env.info_floats} other floats; "
         f"{report.where} has {report.cpus} CPUs",
         "",
         f"measured (RayVectorEnv, transport={report.transport!r}, synthetic env sleeping the "

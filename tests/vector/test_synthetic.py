@@ -33,6 +33,14 @@ def test_spaces_observation_and_info_sizes():
     assert SyntheticEnv(step_ms=0, info_floats=0).reset(seed=0)[1] == {}
 
 
+def test_info_scalars_are_float64_scalars_like_mujoco_tasks_report():
+    env = SyntheticEnv(step_ms=0, info_scalars=3)
+    env.reset(seed=0)
+    info = env.step(env.action_space.sample())[4]
+    assert list(info) == ["info_0", "info_1", "info_2"]
+    assert all(type(v) is np.float64 and v == 1.0 for v in info.values())
+
+
 def test_same_seed_same_durations_and_observations():
     env = SyntheticEnv(step_ms=2.0, cv=0.5)
     first, again = durations(env, 3, 50), durations(env, 3, 50)
@@ -78,6 +86,7 @@ def test_step_sleeps_without_using_the_cpu():
         ({"obs_dim": 0}, r"obs_dim=0: expected an integer >= 1"),
         ({"obs_dim": 2.5}, r"obs_dim=2.5"),
         ({"info_floats": -1}, r"info_floats=-1: expected an integer >= 0"),
+        ({"info_scalars": -1}, r"info_scalars=-1: expected an integer >= 0"),
         ({"action_dim": 0}, r"action_dim=0"),
         ({"max_steps": 0}, r"max_steps=0"),
         ({"reset_ms": -2}, r"reset_ms=-2"),

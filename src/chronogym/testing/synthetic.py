@@ -18,8 +18,10 @@ waiting (what ``step`` calls before it sleeps).
 
 Observations are float32 vectors of ``obs_dim``: element 0 is the last drawn duration in
 ms (at reset, a uniform draw in [0, 1)), the others the step count in the episode. The
-info holds ``"payload"``, ``info_floats`` float32s (the step count), or nothing if
-``info_floats=0``. The action is a Box in [-1, 1] of ``action_dim`` floats; the reward is
+info holds ``"payload"``, ``info_floats`` float32s (the step count), if ``info_floats > 0``,
+and ``info_scalars`` NumPy float64 scalars ``"info_0"``, ``"info_1"``, ... (the step count), as
+Gymnasium's MuJoCo tasks report theirs (Ant-v5: nine), or nothing if both are 0. The
+action is a Box in [-1, 1] of ``action_dim`` floats; the reward is
 ``-sum(action**2)``. Episodes never terminate and truncate after ``max_steps`` steps.
 
 Sleeping accurately: Linux lets a sleep end up to the thread's timer slack (50 µs by
@@ -81,7 +83,8 @@ class SyntheticEnv(gym.Env):
         cv: coefficient of variation of the step's duration (>= 0); 0: every step takes
             ``step_ms``; else lognormal with mean ``step_ms``.
         obs_dim: floats in an observation (>= 1).
-        info_floats: floats in each step's info array ``"payload"`` (>= 0; 0: empty info).
+        info_floats: floats in each step's info array ``"payload"`` (>= 0; 0: none).
+        info_scalars: float64 scalars in each step's info, ``"info_0"`` ... (>= 0; 0: none).
         action_dim: floats in an action (>= 1).
         max_steps: steps in an episode before it truncates (>= 1).
         reset_ms: wall time of a reset, ms (>= 0).
@@ -97,6 +100,7 @@ class SyntheticEnv(gym.Env):
         obs_dim: int = 16,
         info_floats: int = 0,
         action_dim: int = 2,
+        info_scalars: int = 0,
         max_steps: int = 1000,
         reset_ms: float = 0.0,
         precise_sleep: bool = True,
@@ -111,6 +115,8 @@ class SyntheticEnv(gym.Env):
         self.step_ms, self.cv = step_ms, cv
         self.obs_dim = check_int("obs_dim", obs_dim, low=1)
         self.info_floats = check_int("info_floats", info_floats, low=0)
+        self.info_scalars = check_int("info_scalars", info_scalars, low=0)
+        self._info_keys = tuple(f"info_{k}" for k in range(self.info_scalars))
         self.action_dim = check_int("action_dim", action_dim, low=1)
         self.max_steps = check_int("max_steps", max_steps, low=1)
         self.reset_ms = check_number("reset_ms", reset_ms, low=0, expected="milliseconds >= 0")
@@ -176,9 +182,13 @@ class SyntheticEnv(gym.Env):
         return obs
 
     def _info(self) -> dict[str, Any]:
-        if not self.info_floats:
-            return {}
-        return {"payload": np.full(self.info_floats, self._t, dtype=np.float32)}
+        info: dict[str, Any] = {}
+        if self.info_floats:
+            info["payload"] = np.full(self.info_floats, self._t, dtype=np.float32)
+        if self._info_keys:
+            value = np.float64(self._t)
+            info.update(dict.fromkeys(self._info_keys, value))
+        return info
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
