@@ -63,7 +63,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON")
     args = parser.parse_args(argv)
     # what scaling.py's helpers read
-    args.obs_dim, args.info_floats, args.driver_cpus, args.other_cpus = 16, 0, [], []
+    args.obs_dim, args.info_floats, args.info_scalars = 16, 0, 0
+    args.driver_cpus, args.other_cpus = [], []
     return args
 
 

@@ -19,10 +19,12 @@ E(W) is env-steps/s over ``W x`` what one process stepping the same envs seriall
 first at each setting), so E(1) < 1 is the cost of the transport itself. The driver's CPU per
 vector step is measured too, and ``b_cpu``, its slope in W, is fitted per path.
 
-With ``--model JSON`` (a ``scaling.py`` run on the same machine), the synthetic model's
+With ``--model JSON ...`` (``scaling.py`` runs on the same machine), the synthetic model's
 prediction is set beside each measured E(W) / E(1): ``t(W) = t(1) + b_cpu (W - 1)``, with
 ``t(1)`` this run's step at W = 1 and ``b_cpu`` the synthetic fit of the same path and envs per
-worker at the step cost nearest ``t(1)`` ("cores" in ``scaling.py``).
+worker at the step cost nearest ``t(1)`` ("cores" in ``scaling.py``), from the run whose
+``--info-scalars`` is nearest the workload's own (Ant-v5 reports nine scalar infos a step, the
+Go1 none; infos cost the driver Python per worker).
 
     python -m benchmarks.vector.cores                    # W = 1, 2, 4, ... up to the CPUs
     python -m benchmarks.vector.cores --quick            # smoke run: W = 1, 2, short
@@ -40,6 +42,7 @@ import argparse
 import functools
 import gc
 import importlib.util
+import json
 import os
 import sys
 import time
@@ -65,7 +68,7 @@ from benchmarks.common import (
     table,
 )
 from benchmarks.vector.peers import WORKLOADS, Workload, action_sequence, envpool_tasks
-from chronogym.sizing import fit_line, timed_loop
+from chronogym.sizing import fit_line, measure_env, timed_loop
 
 DEFAULT_OUT = RESULTS / "cores.json"
 PATHS = ("fork", "socket", "async", "envpool")
@@ -108,13 +111,21 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--min-steps", type=positive_int, default=20, help="timed, at least")
     parser.add_argument("--warmup", type=non_negative_int, default=10, help="untimed steps")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--model", type=Path, help="a scaling.py JSON of this machine")
+    parser.add_argument(
+        "--model",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="scaling.py JSONs of this machine; each workload takes the one whose "
+        "--info-scalars is nearest its own info's scalars",
+    )
     parser.add_argument("--quick", action="store_true", help="smoke run: W = 1, 2, short")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON; the PNG beside it")
     args = parser.parse_args(argv)
     args.workers = sorted(set(args.workers))
-    if args.model is not None and not args.model.is_file():
-        parser.error(f"--model {args.model}: no such file (expected a scaling.py JSON)")
+    for model in args.model:
+        if not model.is_file():
+            parser.error(f"--model {model}: no such file (expected a scaling.py JSON)")
     if args.quick:
         args.workers, args.envpool_threads = [w for w in (1, 2) if w <= cpus] or [1], []
         args.seconds, args.min_steps, args.warmup = 0.3, 5, 2
@@ -335,18 +346,34 @@ def model_b_cpu(model: dict[str, Any], path: str, epw: int, step_ms: float) -> f
     return float(nearest["b_cpu_us"])
 
 
-def add_predictions(rows: list[dict[str, Any]], model: dict[str, Any]) -> None:
-    """The synthetic model's E(W) / E(1) beside each measured one (see the module doc)."""
+def models_by_nearness(models: dict[str, dict[str, Any]], info_scalars: int) -> list[str]:
+    """The models (file names), the one whose synthetic env's ``info_scalars`` is nearest the
+    given first."""
+    return sorted(
+        models,
+        key=lambda name: abs(models[name]["settings"].get("info_scalars", 0) - info_scalars),
+    )
+
+
+def add_predictions(
+    rows: list[dict[str, Any]], models: dict[str, dict[str, Any]], info_scalars: dict[str, int]
+) -> None:
+    """The synthetic model's E(W) / E(1) beside each measured one (see the module doc), from
+    the model (of ``models``, by file name) nearest each workload's ``info_scalars`` that
+    has a fit of the row's path and envs per worker."""
     ones = {(r["workload"], r["path"], r["envs_per_worker"]): r for r in rows if r["workers"] == 1}
     for row in rows:
         one = ones.get((row["workload"], row["path"], row["envs_per_worker"]))
         if row["path"] == "serial" or one is None:
             continue
         t1 = one["wall_ms_per_step"]
-        b_cpu = model_b_cpu(model, row["path"], row["envs_per_worker"], t1)
-        if b_cpu is None:
+        for name in models_by_nearness(models, info_scalars.get(row["workload"], 0)):
+            b_cpu = model_b_cpu(models[name], row["path"], row["envs_per_worker"], t1)
+            if b_cpu is not None:
+                break
+        else:
             continue
-        row["model_b_cpu_us"] = b_cpu
+        row["model"], row["model_b_cpu_us"] = name, b_cpu
         growth = 1e-3 * max(0.0, b_cpu) * (row["workers"] - 1)  # a slope below 0 is noise
         row["predicted_rel_e"] = t1 / (t1 + growth)
 
@@ -408,10 +435,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}:")
         rows += run_workload(WORKLOADS[name], args, envpool_ids, skipped, failures)
     add_efficiency(rows)
-    if args.model is not None:
-        import json
-
-        add_predictions(rows, json.loads(args.model.read_text()))
+    info_scalars = {
+        name: measure_env(WORKLOADS[name].env_id, WORKLOADS[name].env_kwargs, 0.05).info_scalars
+        for name in args.workloads
+    }
+    record["info_scalars"] = info_scalars
+    if args.model:
+        models = {str(path): json.loads(path.read_text()) for path in args.model}
+        add_predictions(rows, models, info_scalars)
     record.update(
         runs=rows,
         fits=fits(rows),

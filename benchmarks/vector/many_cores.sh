@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Scale-out on a machine with many cores, in one run of about 6 minutes on 16 cores: the
-# synthetic sweep to W = 64 (scaling.py), the machine's ceiling (ceiling.py), and the real
-# workloads against EnvPool's threads with the synthetic model's prediction beside them
-# (cores.py). Every JSON, PNG and log lands in OUT_DIR.
+# synthetic sweep to W = 64 (scaling.py), a short one with Ant-v5's nine scalar infos per step
+# (scaling_infos), the machine's ceiling (ceiling.py), and the real workloads against EnvPool's
+# threads with the synthetic model's prediction beside them (cores.py). Every JSON and log
+# lands in OUT_DIR, and the PNGs of scaling and cores.
 #
 #     bash benchmarks/vector/many_cores.sh OUT_DIR          # the full run
 #     QUICK=1 bash benchmarks/vector/many_cores.sh OUT_DIR  # smoke run, about 1 min
@@ -29,9 +30,9 @@ fi
 
 status=0
 run() {  # run() NAME ARGS...: one benchmark, its log beside its JSON; a failure does not stop
-    local name=$1
+    local name=$1 script=${1%_infos}
     shift
-    "$python" -m "benchmarks.vector.$name" "$@" --out "$out/$name.json" 2>&1 |
+    "$python" -m "benchmarks.vector.$script" "$@" --out "$out/$name.json" 2>&1 |
         tee "$out/$name.log" || status=1
 }
 
@@ -39,9 +40,11 @@ run scaling --paths fork async "${ray_paths[@]}" \
     --straggler-paths fork "${ray_paths[@]}" --straggler-workers "$((cpus < 16 ? cpus : 16))" \
     --workers "${workers[@]}" --envs-per-worker "${epw[@]}" --step-ms "${step_ms[@]}" \
     --seconds "$seconds"
+run scaling_infos --paths fork async "${ray_paths[@]}" --no-stragglers --info-scalars 9 \
+    --workers "${workers[@]}" --envs-per-worker 1 --step-ms 1 --seconds "$seconds"
 run ceiling --paths fork async "${ray_paths[@]}" \
     --workers "${workers[@]}" --step-ms "${step_ms[@]}" --seconds "$seconds"
 run cores --paths fork async envpool "${ray_paths[@]}" \
     --workers "${cores_workers[@]}" --envs-per-worker "${epw[@]}" --seconds "$seconds" \
-    --model "$out/scaling.json"
+    --model "$out/scaling.json" "$out/scaling_infos.json"
 exit $status

@@ -31,6 +31,9 @@ def test_cores_runs_forked_and_async_workers_against_serial(tmp_path):
     # the synthetic model of the same path and envs per worker, at W = 2: at most 1
     assert 0 < rows["fork", 2]["predicted_rel_e"] <= 1.0
     assert rows["fork", 2]["model_b_cpu_us"] is not None
+    assert rows["fork", 2]["model"] == str(MODEL) and record["info_scalars"] == {
+        "chronogym/CartPole-v0": 0
+    }
     assert {f["path"] for f in record["fits"]} == {"fork", "async"}
     assert any(
         s["path"] == "envpool" and "envpool" in s["reason"].lower() for s in record["skipped"]
@@ -113,3 +116,9 @@ def test_efficiency_is_against_serial_and_the_same_paths_first_worker_in_any_ord
     cores.add_efficiency(rows)
     assert [r["efficiency"] for r in rows] == pytest.approx([0.6, 0.8, 1.0])
     assert [r["rel_e"] for r in rows] == pytest.approx([0.75, 1.0, 1.0])
+
+
+def test_each_workload_takes_the_model_nearest_its_infos():
+    models = {"plain": {"settings": {}}, "ant-like": {"settings": {"info_scalars": 9}}}
+    assert cores.models_by_nearness(models, 9) == ["ant-like", "plain"]
+    assert cores.models_by_nearness(models, 0) == ["plain", "ant-like"]
