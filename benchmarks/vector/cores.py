@@ -233,12 +233,6 @@ def measure(
 # -- the run --------------------------------------------------------------------------------
 
 
-def settings_of(args: argparse.Namespace) -> list[tuple[int, int]]:
-    """(W, envs per worker) pairs in the order run: W ascending, so a failure late in the run
-    costs the large W only; EnvPool's extra thread counts come last."""
-    return [(w, epw) for w in args.workers for epw in args.envs_per_worker]
-
-
 def run_workload(
     workload: Workload,
     args: argparse.Namespace,
@@ -262,8 +256,8 @@ def run_workload(
 
     for epw in args.envs_per_worker:
         attempt("serial", 1, epw)
-    for workers, epw in settings_of(args):
-        for path in args.paths:
+    for workers, epw in ((w, e) for w in args.workers for e in args.envs_per_worker):
+        for path in args.paths:  # W ascending: a failure late in the run costs the large W only
             reason = skip_reason(path, workload, epw, envpool_ids)
             if reason:
                 note = {"workload": workload.name, "path": path, "envs_per_worker": epw}

@@ -84,11 +84,11 @@ class SyntheticEnv(gym.Env):
             ``step_ms``; else lognormal with mean ``step_ms``.
         obs_dim: floats in an observation (>= 1).
         info_floats: floats in each step's info array ``"payload"`` (>= 0; 0: none).
-        info_scalars: float64 scalars in each step's info, ``"info_0"`` ... (>= 0; 0: none).
         action_dim: floats in an action (>= 1).
         max_steps: steps in an episode before it truncates (>= 1).
         reset_ms: wall time of a reset, ms (>= 0).
         precise_sleep: end sleeps on time (module doc); False: plain ``time.sleep``.
+        info_scalars: float64 scalars in each step's info, ``"info_0"`` ... (>= 0; 0: none).
     """
 
     metadata = {"render_modes": []}
@@ -100,11 +100,11 @@ class SyntheticEnv(gym.Env):
         obs_dim: int = 16,
         info_floats: int = 0,
         action_dim: int = 2,
-        info_scalars: int = 0,
         max_steps: int = 1000,
         reset_ms: float = 0.0,
         precise_sleep: bool = True,
         render_mode: str | None = None,
+        info_scalars: int = 0,
     ) -> None:
         if render_mode is not None:  # a TypeError too: SB3's make_vec_env then asks for None
             raise RenderModeError(

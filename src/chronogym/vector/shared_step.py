@@ -64,10 +64,11 @@ import numpy as np
 from chronogym.vector.backend import Outcome, StepAnswer
 from chronogym.vector.wire_format import (
     ANSWER,
+    OK,
     REQUEST,
+    answer_extra,
     decode_answer,
     encode_answer,
-    infos_only,
 )
 
 ATTACH = 2  # REQUEST's flag byte: attach to a shared step (0 and 1: a step over the socket)
@@ -331,10 +332,11 @@ class SharedStep:
                     extras[w] = decode(w, view)
                     continue
                 head, *sizes = ANSWER.unpack_from(view)
-                if split_infos and (infos := infos_only(head, sizes, view)) is not None:
-                    answers.infos[w] = infos
+                extra = answer_extra(sizes, view) if split_infos and head == OK else None
+                if extra is not None and len(extra) == 2 and extra[1] is None:
+                    answers.infos[w] = extra[0]  # its rows are in the block already
                     continue
-                extras[w] = decode_answer(head, sizes, view)
+                extras[w] = decode_answer(head, sizes, view, extra)
             else:
                 try:
                     extras[w] = read(w, deadline)

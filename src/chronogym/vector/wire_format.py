@@ -61,8 +61,18 @@ def encode_answer(answer: StepAnswer | StepFailure) -> bytes:
     return ANSWER.pack(OK, *(len(p) for p in parts)) + b"".join(parts)
 
 
-def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
-    """An answer message as the Outcome an actor call gives for the same answer."""
+def answer_extra(sizes: list[int], view: memoryview) -> tuple:
+    """An OK answer message's ``(infos, restarts[, timings])``, its tail unpickled."""
+    if not sizes[4]:
+        return (None, None)
+    return pickle.loads(view[ANSWER.size + sum(sizes[:4]) :])  # trusted: own worker
+
+
+def decode_answer(
+    status: int, sizes: list[int], view: memoryview, extra: tuple | None = None
+) -> Outcome:
+    """An answer message as the Outcome an actor call gives for the same answer
+    (``extra``: its :func:`answer_extra`, where the caller has read it already)."""
     parts, at = [], ANSWER.size
     for size in sizes:
         parts.append(view[at : at + size])
@@ -70,21 +80,10 @@ def decode_answer(status: int, sizes: list[int], view: memoryview) -> Outcome:
     if status == FAILED:
         failure = pickle.loads(parts[4])  # trusted: own worker (a private socket)
         return error_outcome(failure.error, failure.text)
-    obs, rewards, terminations, truncations, tail = parts
-    extra = pickle.loads(tail) if sizes[4] else (None, None)  # trusted: own worker
+    obs, rewards, terminations, truncations, _ = parts
+    extra = answer_extra(sizes, view) if extra is None else extra
     answer = StepAnswer(bytes(obs), bytes(rewards), bytes(terminations), bytes(truncations), *extra)
     return Outcome(True, answer)
-
-
-def infos_only(status: int, sizes: list[int], view: memoryview) -> Any:
-    """The infos of an answer message that adds nothing else to its rows (no restarts,
-    timings or failure); None for any other answer (then :func:`decode_answer`)."""
-    if status != OK or not sizes[4]:
-        return None
-    extra = pickle.loads(view[ANSWER.size + sum(sizes[:4]) :])  # trusted: own worker
-    if len(extra) != 2 or extra[1] is not None:
-        return None
-    return extra[0]
 
 
 def fill(sock: socket.socket, view: memoryview, got: int, need: int) -> int:
