@@ -38,8 +38,9 @@ the worker's *tail* slot in the block (status ``IN_TAIL``), or sent on its socke
 it does not fit (``ON_SOCKET``). A tail that adds only infos to the worker's rows (every
 Gymnasium MuJoCo task reports infos at every step) keeps the step on the whole-batch path:
 the driver takes the rows from the block and joins the infos alone, with no per-worker
-answer to build (``split_infos``; 40-80 µs less of the driver's CPU per worker and step with
-Ant-v5's nine infos on a 2-core VM). A worker that dies shows as a hung-up socket, one
+answer to build (``split_infos``; with Ant-v5's nine infos, 34 µs less of the driver's CPU
+per step with one worker and 48 µs with eight on a 2-core VM:
+``benchmarks/archive/split_infos.py``). A worker that dies shows as a hung-up socket, one
 silent past ``step_timeout`` as lost: both are replaced by the socket transport as
 before. The same :class:`~chronogym.vector.group.EnvGroup` call
 (``step_packed``) makes the bytes either way, so the numbers are the socket path's.
