@@ -7,7 +7,8 @@ both. A regression check for refactors of ``vector/``:
 
     python -m benchmarks.archive.compare_revisions --base 305a016 [--head HEAD] [--rounds 3]
 
-Prints a table (median env-steps/s per shape, head / base ratio) and writes JSON.
+Prints a table (median env-steps/s per shape, head / base ratio, and the driver process's
+CPU per vector step, µs) and writes JSON.
 """
 
 from __future__ import annotations
@@ -45,7 +46,18 @@ INFO_SHAPES = [
     ("go1 fork 4x1", "chronogym/Go1Velocity-v0", {}, 4, "ray",
      {"envs_per_worker": 1, "transport": "fork"}),
 ]  # fmt: skip
-SHAPE_SETS = {"default": SHAPES, "infos": INFO_SHAPES}
+#: The synthetic env with Ant-v5's nine scalar infos and 1 ms steps: the driver's CPU per
+#: vector step at 1, 8 and 32 forked workers gives its cost per worker with infos.
+SYNTHETIC_INFOS = {"step_ms": 1.0, "info_scalars": 9}
+SYNTHETIC_INFO_SHAPES = [
+    (f"synthetic+9 infos fork {w}x1", "chronogym/Synthetic-v0", SYNTHETIC_INFOS, w, "ray",
+     {"envs_per_worker": 1, "transport": "fork"})
+    for w in (1, 8, 32)
+] + [
+    ("synthetic+9 infos ray-sock 8x1", "chronogym/Synthetic-v0", SYNTHETIC_INFOS, 8, "ray",
+     {"envs_per_worker": 1}),
+]  # fmt: skip
+SHAPE_SETS = {"default": SHAPES, "infos": INFO_SHAPES, "synthetic_infos": SYNTHETIC_INFO_SHAPES}
 
 # Runs inside the subprocess: step one shape with random actions, print env-steps/s as JSON.
 MEASURE = r"""
@@ -63,13 +75,14 @@ space.seed(0)
 actions = [space.sample() for _ in range(64)]
 for a in actions[:20]:
     vec.step(a)
-steps, start = 0, time.perf_counter()
+steps, start, cpu = 0, time.perf_counter(), time.process_time()
 while time.perf_counter() - start < seconds:
     vec.step(actions[steps % 64])
     steps += 1
 rate = steps * n / (time.perf_counter() - start)
+cpu_us = 1e6 * (time.process_time() - cpu) / steps
 vec.close()
-print(json.dumps({"rate": rate, "module": chronogym.__file__}))
+print(json.dumps({"rate": rate, "cpu_us": cpu_us, "module": chronogym.__file__}))
 """
 
 
@@ -115,6 +128,7 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"--rounds={args.rounds} / --seconds={args.seconds}: expected >= 1 / > 0")
     revs = {name: rev for name, rev in (("base", args.base), ("head", args.head))}
     rates: dict[str, dict[str, list[float]]] = {s[0]: {"base": [], "head": []} for s in shapes}
+    cpus: dict[str, dict[str, list[float]]] = {s[0]: {"base": [], "head": []} for s in shapes}
     with tempfile.TemporaryDirectory(prefix="chronogym-revs-") as tmp:
         srcs = {name: checkout(rev, Path(tmp) / name) for name, rev in revs.items()}
         try:
@@ -122,9 +136,9 @@ def main(argv: list[str] | None = None) -> None:
                 for shape in shapes:
                     order = ("base", "head") if r % 2 == 0 else ("head", "base")
                     for name in order:
-                        rates[shape[0]][name].append(
-                            measure(srcs[name], shape, args.seconds)["rate"]
-                        )
+                        got = measure(srcs[name], shape, args.seconds)
+                        rates[shape[0]][name].append(got["rate"])
+                        cpus[shape[0]][name].append(got["cpu_us"])
                     print(f"round {r + 1}/{args.rounds} {shape[0]}: "
                           f"base {rates[shape[0]]['base'][-1]:,.0f} "
                           f"head {rates[shape[0]]['head'][-1]:,.0f}", flush=True)  # fmt: skip
@@ -143,11 +157,24 @@ def main(argv: list[str] | None = None) -> None:
                     capture_output=True,
                 )
     rows = []
-    print(f"\n{'shape':<26}{'base':>12}{'head':>12}{'head/base':>11}")
+    print(f"\n{'shape':<32}{'base':>10}{'head':>10}{'head/base':>10}"
+          f"{'cpu base':>10}{'cpu head':>10}")  # fmt: skip
     for label, per in rates.items():
         base, head = statistics.median(per["base"]), statistics.median(per["head"])
-        rows.append({"shape": label, "base": base, "head": head, "ratio": head / base, **per})
-        print(f"{label:<26}{base:>12,.0f}{head:>12,.0f}{head / base:>11.2f}")
+        cpu = {name: statistics.median(values) for name, values in cpus[label].items()}
+        rows.append(
+            {
+                "shape": label,
+                "base": base,
+                "head": head,
+                "ratio": head / base,
+                **per,
+                "driver_cpu_us": cpu,
+                "driver_cpu_us_rounds": cpus[label],
+            }
+        )
+        print(f"{label:<32}{base:>10,.0f}{head:>10,.0f}{head / base:>10.2f}"
+              f"{cpu['base']:>10,.0f}{cpu['head']:>10,.0f}")  # fmt: skip
     commits = {
         name: subprocess.run(
             ["git", "-C", str(REPO), "rev-parse", rev], capture_output=True, text=True
@@ -162,7 +189,8 @@ def main(argv: list[str] | None = None) -> None:
         "shapes": args.shapes,
         "rows": rows,
     }
-    write_json(args.out, record, note=f" (env-steps/s, medians of {args.rounds} rounds)")
+    note = f" (env-steps/s and the driver's CPU µs per step, medians of {args.rounds} rounds)"
+    write_json(args.out, record, note=note)
 
 
 if __name__ == "__main__":

@@ -42,9 +42,11 @@ With every worker on the driver's node (the usual case), the barrier ``step`` sk
 ``SharedStep.step`` copies the actions into a memory block shared with the workers and
 wakes them all with one byte on a pipe; each worker's ``_serve_conn`` calls
 ``SharedServer.serve`` (the same ``EnvGroup.step_packed``), which writes its rows and counts
-its answer; the last one wakes the driver, which copies every row out at once. A worker
-with infos, restarts or an error writes its whole answer (``encode_answer``) beside its
-rows, and hops 5-6 take it from there. With workers on other nodes too, ``shared_step``
+its answer; the last one wakes the driver, which copies every row out at once. Infos that
+are the same numeric scalars in every env are rows too (``info_rows.py``: ``RowWriter``
+in the worker, ``join_rows`` in the driver). A worker with other infos, restarts or an
+error writes its whole answer (``encode_answer``) beside its rows, and hops 5-6 take it
+from there. With workers on other nodes too, ``shared_step``
 goes to ``SocketBackend._spread_step`` -> ``spread_step.py``: ``SpreadStep.step``, which
 sends each other node's relay its rows as one frame over that relay's TCP line
 (``relay_channel.py``: ``DriverLine.send``; ``RelayLine`` calls ``NodeRelay.shared_step``,

@@ -286,12 +286,15 @@ class EnvGroup:
         return StepAnswer(list(self.last_obs), *flags, infos, restarts)
 
     @locked
-    def step_packed(self, action_bytes: bytes | memoryview, timed: bool = False) -> StepAnswer:
+    def step_packed(
+        self, action_bytes: bytes | memoryview, timed: bool = False, raw_infos: bool = False
+    ) -> StepAnswer:
         """``step`` for Box spaces with raw bytes in and out (cheaper to send than arrays).
 
         Returns (obs, rewards, terminations, truncations) as bytes, then the
         infos (:func:`~chronogym.vector.infos.to_columns`: None when all are
-        empty, else columns or per-env dicts) and the restarts (None when none). With
+        empty, else columns or per-env dicts; ``raw_infos``: the envs' own dicts, for
+        the shared step to lay out) and the restarts (None when none). With
         ``timed``, also ``timings``: (seconds of (de)serialization, seconds in ``step``).
         """
         start = time.perf_counter()
@@ -309,7 +312,7 @@ class EnvGroup:
             result.rewards.tobytes(),
             result.terminations.tobytes(),
             result.truncations.tobytes(),
-            to_columns(result.infos),
+            result.infos if raw_infos else to_columns(result.infos),
             result.restarts or None,
         )
         if timed:

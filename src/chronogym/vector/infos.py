@@ -64,7 +64,7 @@ class InfoColumns:
         ]
 
 
-def _is_scalar_type(kind: type) -> bool:
+def is_scalar_type(kind: type) -> bool:
     """The types Gymnasium batches into a numeric array of ``dtype=kind``."""
     return kind in (int, float, bool) or issubclass(kind, np.number)
 
@@ -82,7 +82,7 @@ def to_columns(infos: Sequence[dict[str, Any]]) -> InfoColumns | Infos | None:
     for key, value in first.items():
         kind = type(value)
         values = [info[key] for info in infos]
-        if not _is_scalar_type(kind) or len(set(map(type, values))) != 1:
+        if not is_scalar_type(kind) or len(set(map(type, values))) != 1:
             return list(infos)
         try:
             column = np.array(values, dtype=kind)

@@ -40,7 +40,11 @@ Gymnasium MuJoCo task reports infos at every step) keeps the step on the whole-b
 the driver takes the rows from the block and joins the infos alone, with no per-worker
 answer to build (``split_infos``; with Ant-v5's nine infos, 34 µs less of the driver's CPU
 per step with one worker and 48 µs with eight on a 2-core VM:
-``benchmarks/archive/split_infos.py``). A worker that dies shows as a hung-up socket, one
+``benchmarks/archive/split_infos.py``). In the driver's own block the infos need not even be
+pickled: a worker whose envs report the same numeric scalars writes them as records into its
+envs' rows of the block's info area (status ``INFO_ROWS``, :mod:`chronogym.vector.info_rows`),
+and when every worker did so with one schema the driver copies each key's column out of the
+area, with nothing per worker. A worker that dies shows as a hung-up socket, one
 silent past ``step_timeout`` as lost: both are replaced by the socket transport as
 before. The same :class:`~chronogym.vector.group.EnvGroup` call
 (``step_packed``) makes the bytes either way, so the numbers are the socket path's.
@@ -63,6 +67,8 @@ from typing import Any
 import numpy as np
 
 from chronogym.vector.backend import Outcome, StepAnswer
+from chronogym.vector.info_rows import INFO_ROW, RowReader, RowWriter, join_rows
+from chronogym.vector.infos import to_columns
 from chronogym.vector.wire_format import (
     ANSWER,
     OK,
@@ -73,7 +79,8 @@ from chronogym.vector.wire_format import (
 )
 
 ATTACH = 2  # REQUEST's flag byte: attach to a shared step (0 and 1: a step over the socket)
-PLAIN, IN_TAIL, ON_SOCKET = 0, 1, 2  # a worker's status word after a shared step
+PLAIN, IN_TAIL, ON_SOCKET, INFO_ROWS = 0, 1, 2, 3  # a worker's status word after a shared
+# step (INFO_ROWS: its infos in the info area, its schema's text in its tail slot)
 DIRECT, LEADER, MEMBER = "direct", "leader", "member"  # how a worker is woken (see wake_plan)
 FANOUT = 8  # with many workers: groups of this many, each woken by its first (the leader)
 TREE_MIN_WORKERS = 16  # fewer workers: the driver wakes them all itself
@@ -94,6 +101,7 @@ class SharedLayout:
     action_row: int  # bytes of one env's action
     obs_row: int  # bytes of one env's observation
     tail_bytes: int = TAIL_BYTES
+    info_row: int = 0  # bytes per env of the info area (0: none; infos go to the tail slot)
     offsets: dict[str, int] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -109,6 +117,7 @@ class SharedLayout:
             "done": 8 * w,
             "status": 8 * w,  # per worker: uint32 status, uint32 tail length
             "tails": w * self.tail_bytes,
+            "info_rows": n * self.info_row,
         }
         at = 0
         for name, size in sizes.items():
@@ -141,6 +150,7 @@ class SharedViews:
         self.done = np.frombuffer(buf, np.uint64, w, o["done"])
         self.status = np.frombuffer(buf, np.uint32, 2 * w, o["status"]).reshape(w, 2)
         self.tails = np.frombuffer(buf, np.uint8, w * layout.tail_bytes, o["tails"])
+        self.info_rows = np.frombuffer(buf, np.uint8, n * layout.info_row, o["info_rows"])
 
     def release(self) -> None:
         """Drop the views, so the block can be unmapped."""
@@ -207,6 +217,8 @@ class SharedAnswers:
     # Outcome on the driver, a RelayAnswer in a relay
     infos: dict[int, Any] = field(default_factory=dict)  # worker -> its infos, where they
     # were all it had to add to its rows (``split_infos``)
+    joined: dict[str, Any] | None = None  # every env's infos as one vector info, where every
+    # worker wrote them as rows of one schema (:mod:`chronogym.vector.info_rows`)
 
     def outcome(self, w: int, lo: int, hi: int) -> Outcome:
         """Worker ``w``'s answer as the socket path gives it (rows ``lo:hi``)."""
@@ -253,6 +265,7 @@ class SharedStep:
         self._done_poll = select.poll()
         self._done_poll.register(self._done_r, select.POLLIN)
         self._spinner = AdaptiveSpin(spin_s)
+        self._schemas = RowReader()
         self.gen = 0
         self.attached: set[int] = set()
 
@@ -322,7 +335,11 @@ class SharedStep:
         answers = SharedAnswers(
             obs, v.rewards.copy(), v.terminations.copy(), v.truncations.copy(), extras
         )
-        for w in np.flatnonzero(v.status[:, 0]).tolist():
+        said = np.flatnonzero(v.status[:, 0])
+        if not len(said):
+            return answers
+        kinds = v.status[said, 0]
+        for w in said[kinds != INFO_ROWS].tolist():
             if w in extras:
                 continue
             status, size = v.status[w]
@@ -343,7 +360,31 @@ class SharedStep:
                     extras[w] = read(w, deadline)
                 except (OSError, EOFError) as error:
                     extras[w] = lost(w, error)
+        if (rows := said[kinds == INFO_ROWS]).size:
+            self._take_rows(rows, answers)
         return answers
+
+    def _take_rows(self, rows: np.ndarray, answers: SharedAnswers) -> None:
+        """The infos that workers ``rows`` wrote to the info area: one vector info when every
+        worker wrote rows of one schema (its text the same in every tail slot), else each
+        worker's columns, as its tail slot would have held them."""
+        v, lay = self.views, self.layout
+        workers = len(lay.slices)
+        if rows.size == workers and not answers.extras:
+            sizes = v.status[:, 1]
+            size = int(sizes[0])
+            texts = v.tails.reshape(workers, lay.tail_bytes)[:, :size]
+            if workers == 1 or ((sizes == size).all() and (texts == texts[0]).all()):
+                schema = self._schemas.schema(texts[0].tobytes())
+                answers.joined = join_rows(schema, v.info_rows, lay.num_envs)
+                return
+        for w in rows.tolist():
+            if w in answers.extras:
+                continue
+            at, (lo, hi) = w * lay.tail_bytes, lay.slices[w]
+            schema = self._schemas.schema(v.tails[at : at + int(v.status[w, 1])].tobytes())
+            records = v.info_rows[lo * lay.info_row : hi * lay.info_row].view(schema.dtype)
+            answers.infos[w] = schema.columns(records)
 
     def _wait(
         self, g: int, socks: list[socket.socket | None], deadline: float | None, lost: Any
@@ -424,6 +465,7 @@ class SharedServer:
         self._map = mmap.mmap(self._mem_fd, layout.size)
         self._go = (go0, go1)
         self.views = SharedViews(layout, self._map)
+        self._rows = RowWriter() if layout.info_row == INFO_ROW else None
         self.last = gen
         self.on_socket = b""  # an answer too long for the tail slot, to send on the socket
 
@@ -443,7 +485,8 @@ class SharedServer:
         return int(self.views.gen[0]) > self.last
 
     def serve(self, step: Any) -> None:
-        """Answer the current step: ``step(action_bytes)`` gives a StepAnswer or StepFailure."""
+        """Answer the current step: ``step(action_bytes)`` gives a StepAnswer (its infos as
+        the envs gave them: a list of dicts) or a StepFailure."""
         v, lo, hi, lay = self.views, self.lo, self.hi, self.layout
         g = int(v.gen[0])
         if self._fanout:  # a leader wakes its group first (its own step may be long)
@@ -456,6 +499,11 @@ class SharedServer:
             v.rewards[lo:hi] = np.frombuffer(answer.rewards, np.float64)
             v.terminations[lo:hi] = np.frombuffer(answer.terminations, np.bool_)
             v.truncations[lo:hi] = np.frombuffer(answer.truncations, np.bool_)
+            if self._wrote_rows(answer):
+                status, size = INFO_ROWS, len(self._rows.schema.text)  # type: ignore[union-attr]
+                answer.infos = None
+            elif isinstance(answer.infos, list):
+                answer.infos = to_columns(answer.infos)
             extra = answer.infos is not None or answer.restarts or answer.timings
         else:
             extra = True
@@ -474,6 +522,24 @@ class SharedServer:
         if self._counted_last(g):
             os.write(self._done_w, b"\x01")
         self.on_socket = message if status == ON_SOCKET else b""
+
+    def _wrote_rows(self, answer: StepAnswer) -> bool:
+        """Did the answer's infos go to the info area as rows of one schema (whose text is
+        then in this worker's tail slot)? Not with restarts or timings: those need the
+        tail slot."""
+        if self._rows is None or answer.restarts or answer.timings:
+            return False
+        if not isinstance(answer.infos, list):
+            return False
+        if (records := self._rows.records(answer.infos)) is None:
+            return False
+        v, lay, text = self.views, self.layout, self._rows.schema.text  # type: ignore[union-attr]
+        if len(text) > lay.tail_bytes:
+            return False
+        v.info_rows[self.lo * INFO_ROW : self.hi * INFO_ROW] = np.frombuffer(records, np.uint8)
+        at = self.w * lay.tail_bytes
+        v.tails[at : at + len(text)] = np.frombuffer(text, np.uint8)
+        return True
 
     def _counted_last(self, g: int) -> bool:
         """Count this answer to step ``g`` (under a lock on the block: the workers are

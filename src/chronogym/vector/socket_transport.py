@@ -57,6 +57,7 @@ from chronogym.validation import check_number
 from chronogym.vector.actor_transport import ActorBackend, ActorGroup
 from chronogym.vector.backend import Outcome, gather_split
 from chronogym.vector.group import EnvGroup
+from chronogym.vector.info_rows import INFO_ROW
 from chronogym.vector.relay import ANSWERED, LOST, SILENT, RelayHandle, Relays
 from chronogym.vector.shared_step import (
     ATTACH,
@@ -196,7 +197,7 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
     head = memoryview(bytearray(REQUEST.size))
     data = memoryview(bytearray(256))
     plain, spinner = poller_of(conn), AdaptiveSpin(spin_s)
-    step_shared = functools.partial(_step_bytes, group, timed=False)
+    step_shared = functools.partial(_step_bytes, group, timed=False, raw_infos=True)
     shared: SharedServer | None = None
     go_pollers: dict[int, select.poll] = {}
     try:
@@ -264,11 +265,13 @@ def _attach(conn: socket.socket, size: int) -> SharedServer | None:
     return server
 
 
-def _step_bytes(group: EnvGroup, action_bytes: memoryview, timed: bool) -> Any:
+def _step_bytes(
+    group: EnvGroup, action_bytes: memoryview, timed: bool, raw_infos: bool = False
+) -> Any:
     """``EnvGroup.step_packed`` (which holds the group's lock): the typed answer, not an
     actor's tuple form; an error as a StepFailure."""
     try:
-        return EnvGroup.step_packed(group, action_bytes, timed)
+        return EnvGroup.step_packed(group, action_bytes, timed, raw_infos)
     except Exception as error:
         return StepFailure(error, traceback.format_exc())
 
@@ -518,7 +521,8 @@ class SocketBackend(ActorBackend):
         self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
     ) -> bool:
         """Make the block and attach every worker; False (and off for good) if one fails."""
-        layout = SharedLayout(tuple(slices), actions.nbytes // slices[-1][1], obs_row)
+        action_row = actions.nbytes // slices[-1][1]
+        layout = SharedLayout(tuple(slices), action_row, obs_row, info_row=INFO_ROW)
         try:
             self._shared = SharedStep(layout, self._dir, self.spin_us * 1e-6, self.wake_tree)
         except OSError as error:

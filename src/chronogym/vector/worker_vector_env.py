@@ -401,7 +401,7 @@ class WorkerVectorEnv(VectorEnv):
         kept = answers.obs.view(obs_space.dtype).reshape(self.num_envs, *obs_space.shape)  # type: ignore[misc]
         kept.flags.writeable = False
         self._last_parts.set_all(kept, self._slices)
-        infos = {}
+        infos = answers.joined or {}
         if answers.infos:  # the workers' infos, as the socket path joins them
             parts = [answers.infos.get(w) for w in range(self.num_workers)]
             infos = join_infos(parts, [hi - lo for lo, hi in self._slices])
