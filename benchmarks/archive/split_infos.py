@@ -10,6 +10,11 @@ envs), so the difference is the driver's own work, read as the stepping thread's
     python -m benchmarks.archive.split_infos --workers 1 8
 
 Output: a table and JSON (default ``benchmarks/results/split_infos.json``).
+
+Since the infos' rows (``chronogym.vector.info_rows``, 2026-12-07), Ant-v5's infos no longer
+travel in the tail slot, so on later revisions both settings take the rows' path: the probe
+answers its question only for revisions before cb8036a (or an env whose infos are not
+numeric scalars).
 """
 
 from __future__ import annotations

@@ -3,8 +3,9 @@
 Every Gymnasium MuJoCo task reports the same numeric scalars at every step (Ant-v5: nine,
 one of them ``float32``). Through a worker's tail slot (:mod:`chronogym.vector.shared_step`)
 they were pickled by the worker each step, and read, unpickled and joined by the driver
-worker by worker: ~12 µs of the driver's CPU per worker and step, the largest part of its
-per-worker cost on such tasks.
+worker by worker: 10.7 µs of the driver's CPU per worker and step on a 2-core VM, the
+largest part of its per-worker cost on such tasks; 1.7 µs as rows
+(``benchmarks/results/compare_revisions_info_rows_synthetic.json``).
 
 Here, when every env of a worker reports the keys and value types of one :class:`InfoSchema`,
 the worker writes its envs' infos as records of the schema's NumPy structured dtype into its
