@@ -230,6 +230,61 @@ def test_spread_step_carries_infos_and_resets_like_serial(cluster, info_floats):
     assert seen["tcp"][1] >= 1 and seen["calls"][1] == 0
 
 
+@pytest.mark.parametrize("transport", ["socket", "fork"])
+def test_scalar_infos_cross_the_nodes_as_rows_and_survive_a_lost_worker(
+    cluster, monkeypatch, transport
+):
+    """Ant-v5's nine scalar infos, workers on every node: each node's infos come as records
+    of one schema (info_rows.py) and join to what a serial run gives, dtypes and all. With a
+    relayed worker killed, the other workers' infos still come, as columns each."""
+    import os
+    import signal
+    import time
+
+    from gymnasium.utils.env_checker import data_equivalence
+
+    from chronogym.vector import spread_step
+    from chronogym.vector.ray_vector_env import RayVectorEnv
+    from chronogym.vector.serial import SerialVectorEnv
+
+    took = []  # per step with node rows: did they join as one batch of records?
+    join = spread_step._take_node_rows
+
+    def watched(nodes, answers, num_envs):
+        join(nodes, answers, num_envs)
+        took.append((len(nodes), answers.rows is not None))
+
+    monkeypatch.setattr(spread_step, "_take_node_rows", watched)
+    where = {"fork": {}, "socket": {"scheduling": "spread", "num_cpus": 0.5}}[transport]
+    options = {"envs_per_worker": 2, "autoreset_mode": "SameStep"}
+    vec = RayVectorEnv("Ant-v5", 6, address=cluster.address, transport=transport, **where,
+                       **options)  # fmt: skip
+    rng = np.random.default_rng(4)
+    actions = [rng.uniform(-1, 1, (6, 8)).astype(np.float32) for _ in range(12)]
+    try:
+        relayed = [w for w, on in enumerate(vec._backend.relayed()) if on]
+        assert relayed, "no worker on another node"
+        got = [vec.reset(seed=2)] + [vec.step(a) for a in actions]
+        relays = vec._backend._relays
+        nodes = len(set(relays.node_of.values())) + (len(relayed) < vec.num_workers)
+        assert took[-10:] == [(nodes, True)] * 10 and nodes > 1
+        os.kill(vec.worker_pids()[relayed[0]], signal.SIGKILL)
+        time.sleep(0.3)
+        _, _, _, truncated, info = vec.step(actions[0])
+        lost = truncated.copy()
+        assert lost.sum() == 2 and took[-1][1] is False
+        assert info["_reward_forward"].tolist() == (~lost).tolist()  # a step's, not a reset's
+        assert info["worker_restarted"][lost].all()
+    finally:
+        vec.close()
+    serial = SerialVectorEnv("Ant-v5", 6, **options)
+    try:
+        want = [serial.reset(seed=2)] + [serial.step(a) for a in actions]
+    finally:
+        serial.close()
+    assert data_equivalence(got, want, exact=True)
+
+
 @pytest.mark.parametrize("fails", ["block", "line"])
 def test_a_spread_step_falls_back_where_it_cannot_open(cluster, monkeypatch, fails):
     """A node's block that cannot be opened turns shared memory off (with a warning): the

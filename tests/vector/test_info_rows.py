@@ -8,7 +8,16 @@ import pytest
 from gymnasium.utils.env_checker import data_equivalence
 from info_envs import InfoEnv
 
-from chronogym.vector.info_rows import INFO_ROW, InfoSchema, RowReader, RowWriter, join_rows
+from chronogym.vector.info_rows import (
+    INFO_ROW,
+    InfoSchema,
+    RowReader,
+    RowWriter,
+    join_rows,
+    pack_node_rows,
+    records_in,
+    unpack_node_rows,
+)
 from chronogym.vector.infos import batch_infos, join_infos, to_columns
 
 
@@ -43,7 +52,7 @@ def laid_out(infos_per_worker: list[list[dict]]) -> tuple[InfoSchema, np.ndarray
 def test_rows_give_the_vector_info_of_columns_and_of_gymnasium():
     parts = [env_infos(2), env_infos(3)]
     schema, area, total = laid_out(parts)
-    joined = join_rows(schema, area, total)
+    joined = join_rows(schema, records_in(area, schema, total))
     columns = join_infos([to_columns(p) for p in parts], [2, 3])
     gymnasium = batch_infos(parts[0] + parts[1])
     assert data_equivalence(joined, columns, exact=True)
@@ -57,7 +66,7 @@ def test_rows_give_the_vector_info_of_columns_and_of_gymnasium():
 def test_a_workers_rows_are_the_columns_it_would_have_sent():
     infos = env_infos(3)
     schema, area, total = laid_out([infos])
-    records = area[: total * INFO_ROW].view(schema.dtype)
+    records = records_in(area, schema, total)
     assert schema.columns(records) == to_columns(infos)
     assert [type(v) for v in schema.columns(records).per_env()[0].values()] == [
         float,
@@ -93,3 +102,18 @@ def test_a_new_schema_when_the_keys_change():
     assert records is not None and writer.schema != first
     assert writer.schema.kinds == ("py<f8", "<f4")
     assert InfoSchema.parse(writer.schema.text) == writer.schema
+
+
+def test_a_nodes_rows_travel_without_padding_and_join_the_same():
+    """A relay packs its node's records (the schema's text, then the bytes that hold values);
+    the driver's records of the packed dtype join to the same vector info."""
+    infos = env_infos(3)
+    schema, area, total = laid_out([infos])
+    data = pack_node_rows(schema, records_in(area, schema, total))
+    assert len(data) < total * INFO_ROW
+    got, block = unpack_node_rows(RowReader(), data, total)
+    assert got == schema and block.shape == (total, schema.used)
+    packed = np.ascontiguousarray(block).view(schema.packed).reshape(total)
+    assert data_equivalence(
+        join_rows(got, packed), join_rows(schema, records_in(area, schema, total)), exact=True
+    )

@@ -47,7 +47,7 @@ def dial(relay: RelayLine, token: bytes | None = None, timeout: float = 10.0):
 
 def test_extras_round_trip_bytes_and_reasons():
     extras = [(0, "answered", b"\x00\x01raw"), (12, "lost", "its socket failed: é"),
-              (3, "silent", "no answer")]  # fmt: skip
+              (3, "silent", "no answer"), (0, "rows", b"\x05\x00\x00\x00texts\xff")]  # fmt: skip
     assert decode_extras(memoryview(encode_extras(extras))) == extras
     assert decode_extras(memoryview(b"")) == []
 

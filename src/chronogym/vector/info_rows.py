@@ -23,6 +23,7 @@ another type, an array, an episode end's ``final_obs``) travels in the tail slot
 from __future__ import annotations
 
 import json
+import struct
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +32,7 @@ import numpy as np
 from chronogym.vector.infos import PYTHON, InfoColumns, is_scalar_type
 
 INFO_ROW = 256  # bytes of the block's info area per env: 32 eight-byte scalars
+TEXT = struct.Struct("<I")  # a node's rows (:func:`pack_node_rows`): the schema text's length
 
 
 @dataclass(frozen=True)
@@ -40,7 +42,13 @@ class InfoSchema:
     keys: tuple[str, ...]
     kinds: tuple[str, ...]  # as InfoColumns names them ("py" for Python's own scalars)
     dtype: np.dtype  # a structured dtype of INFO_ROW bytes: one field per key
+    packed: np.dtype  # the same fields with no padding after them (``used`` bytes)
     text: bytes  # the schema as both ends name it (a worker writes it to its tail slot)
+
+    @property
+    def used(self) -> int:
+        """Bytes of a record that hold values (the rest of its INFO_ROW is padding)."""
+        return self.packed.itemsize
 
     @classmethod
     def of_kinds(cls, keys: tuple[str, ...], kinds: tuple[str, ...]) -> InfoSchema | None:
@@ -54,8 +62,9 @@ class InfoSchema:
             return None
         fields = {"names": list(keys), "formats": formats, "offsets": offsets}
         dtype = np.dtype({**fields, "itemsize": INFO_ROW})
+        packed = np.dtype({**fields, "itemsize": max(at, 1)})
         text = json.dumps([list(keys), list(kinds)], ensure_ascii=True).encode()
-        return cls(keys, kinds, dtype, text)
+        return cls(keys, kinds, dtype, packed, text)
 
     @classmethod
     def parse(cls, text: bytes) -> InfoSchema:
@@ -137,9 +146,31 @@ class RowReader:
         return schema
 
 
-def join_rows(schema: InfoSchema, area: np.ndarray, num_envs: int) -> dict[str, Any]:
-    """Every env's infos, rows of one schema, as one Gymnasium vector info."""
-    records = area[: num_envs * INFO_ROW].view(schema.dtype)
+def records_in(area: np.ndarray, schema: InfoSchema, num_envs: int) -> np.ndarray:
+    """The first ``num_envs`` rows of an info area (uint8) as records of ``schema`` (a view)."""
+    return area[: num_envs * INFO_ROW].view(schema.dtype)
+
+
+def pack_node_rows(schema: InfoSchema, records: np.ndarray) -> bytes:
+    """A relay's records of one schema as bytes for the driver: the schema's text, then
+    each record's ``used`` bytes (no padding)."""
+    used = records.view(np.uint8).reshape(len(records), INFO_ROW)[:, : schema.used]
+    return TEXT.pack(len(schema.text)) + schema.text + used.tobytes()
+
+
+def unpack_node_rows(reader: RowReader, data: bytes, count: int) -> tuple[InfoSchema, np.ndarray]:
+    """:func:`pack_node_rows`'s schema and ``count`` records (as a ``(count, used)`` uint8
+    array)."""
+    (size,) = TEXT.unpack_from(data)
+    schema = reader.schema(bytes(data[TEXT.size : TEXT.size + size]))
+    block = np.frombuffer(data, np.uint8, count * schema.used, TEXT.size + size)
+    return schema, block.reshape(count, schema.used)
+
+
+def join_rows(schema: InfoSchema, records: np.ndarray) -> dict[str, Any]:
+    """Every env's infos, records of one schema (its ``dtype`` or ``packed``), as one
+    Gymnasium vector info."""
+    num_envs = len(records)
     masks = np.ones((len(schema.keys), num_envs), dtype=np.bool_)
     out: dict[str, Any] = {}
     for key, mask in zip(schema.keys, masks, strict=True):

@@ -56,16 +56,25 @@ from typing import Any, TypeVar
 import numpy as np
 
 from chronogym.vector.fork_zygote import fork_worker, how_ended
+from chronogym.vector.info_rows import INFO_ROW, pack_node_rows
 from chronogym.vector.relay_channel import (
     ANSWERED,
     LOST,
+    ROWS,
     SILENT,
     RelayAnswer,
     RelayLine,
     SharedRows,
 )
-from chronogym.vector.shared_step import SharedLayout, SharedStep
-from chronogym.vector.wire_format import ANSWER, CALL, REQUEST, fill, read_call_answer
+from chronogym.vector.shared_step import SharedAnswers, SharedLayout, SharedStep
+from chronogym.vector.wire_format import (
+    ANSWER,
+    CALL,
+    REQUEST,
+    encode_answer,
+    fill,
+    read_call_answer,
+)
 
 T = TypeVar("T")
 FORK_DEATH_PROBE_S = 2.0  # how long a relay waits to learn how a forked worker that hung up ended
@@ -247,7 +256,7 @@ class NodeRelay:
         is then closed, so its next step reports it lost)."""
         self.close_shared()
         try:
-            layout = SharedLayout(tuple(slices), action_row, obs_row)
+            layout = SharedLayout(tuple(slices), action_row, obs_row, info_row=INFO_ROW)
             shared = SharedStep(layout, self.dir, self.spin_us * 1e-6, tree)
         except OSError:
             return False
@@ -303,7 +312,22 @@ class NodeRelay:
             decode=lambda i, view: (workers[i], ANSWERED, bytes(view)),
         )
         rows = (answers.obs, answers.rewards, answers.terminations, answers.truncations)
-        return (*rows, list(answers.extras.values()))
+        return (*rows, self._extras(answers, shared.layout.slices, workers))
+
+    @staticmethod
+    def _extras(
+        answers: SharedAnswers, slices: tuple[tuple[int, int], ...], workers: list[int]
+    ) -> list[RelayAnswer]:
+        """What the driver hears beyond the rows: the workers' whole answers, and the node's
+        infos as records of one schema where every worker wrote them so (else each such
+        worker's answer whole, its infos as columns)."""
+        extras = list(answers.extras.values())
+        if answers.rows is not None:
+            extras.append((0, ROWS, pack_node_rows(*answers.rows)))
+        for i in answers.infos:
+            answer = answers.outcome(i, *slices[i]).value
+            extras.append((workers[i], ANSWERED, encode_answer(answer)))
+        return extras
 
     @locked
     def close_shared(self) -> None:

@@ -6,14 +6,15 @@ fixed cost bounds a cluster run long before the per-worker work does. So when th
 opens a spread step (:mod:`chronogym.vector.spread_step`), each relay also opens a TCP
 listener on its node for exactly one connection (:class:`RelayLine`), and the driver dials
 it (:class:`DriverLine`). A step is then one frame each way over that connection: the
-node's action rows out, and back the node's rows (obs, rewards, terminations, truncations)
-plus the few answers of workers with more to say. A send and a receive cost the driver tens
+node's action rows out, and back the node's rows (obs, rewards, terminations, truncations),
+its workers' numeric scalar infos as records of one schema (:mod:`chronogym.vector.info_rows`)
+and the few answers of workers with more to say. A send and a receive cost the driver tens
 of µs.
 
 Security: the listener accepts one connection, and only from a peer that sends the 32-byte
 token the relay drew (:func:`secrets.token_bytes`) and handed to the driver through Ray's
 own channel; any other peer is dropped. Once connected the listener closes. Nothing on the
-line is unpickled: the answers carry bytes, and reasons as UTF-8 text.
+line is unpickled: the answers carry bytes, reasons UTF-8 text and an info schema JSON.
 
 Faults are those of a Ray call: a line that fails, closes or stays silent past the relay
 timeout makes the node's relay dead and its workers lost. A line that cannot be opened
@@ -43,11 +44,14 @@ OK, FAILED = 0, 1
 READY = b"\x01"  # the relay's answer to a valid token
 TOKEN_TIMEOUT_S = 2.0  # a peer's time to send its token once connected
 #: What a relay says about a worker, in wire order (:mod:`chronogym.vector.relay` names them
-#: ANSWERED, LOST, SILENT): answered carries the answer's bytes, the others a reason.
-KINDS = ANSWERED, LOST, SILENT = ("answered", "lost", "silent")
+#: ANSWERED, LOST, SILENT): answered carries the answer's bytes, the others a reason. ROWS
+#: is about the whole node: every worker's infos as records of one schema
+#: (:func:`~chronogym.vector.info_rows.pack_node_rows`; its worker field is 0).
+KINDS = ANSWERED, LOST, SILENT, ROWS = ("answered", "lost", "silent", "rows")
 
 #: What a relay returns per worker: (worker, ANSWERED, the answer's bytes), or (worker, LOST
-#: or SILENT, why): its socket failed, or it did not answer within ``step_timeout``.
+#: or SILENT, why): its socket failed, or it did not answer within ``step_timeout``; and for
+#: the node, (0, ROWS, its infos' records) where every worker wrote them as rows.
 RelayAnswer = tuple[int, str, Any]
 #: What a relay's shared step returns: its workers' obs rows (uint8), rewards, terminations
 #: and truncations, in the order of its block, and the RelayAnswers of the workers with more
@@ -73,7 +77,7 @@ def decode_extras(view: memoryview) -> list[RelayAnswer]:
         data = bytes(view[at : at + size])
         at += size
         name = KINDS[kind]
-        extras.append((worker, name, data if name == ANSWERED else data.decode()))
+        extras.append((worker, name, data if name in (ANSWERED, ROWS) else data.decode()))
     return extras
 
 

@@ -67,7 +67,7 @@ from typing import Any
 import numpy as np
 
 from chronogym.vector.backend import Outcome, StepAnswer
-from chronogym.vector.info_rows import INFO_ROW, RowReader, RowWriter, join_rows
+from chronogym.vector.info_rows import INFO_ROW, InfoSchema, RowReader, RowWriter, records_in
 from chronogym.vector.infos import to_columns
 from chronogym.vector.wire_format import (
     ANSWER,
@@ -217,8 +217,9 @@ class SharedAnswers:
     # Outcome on the driver, a RelayAnswer in a relay
     infos: dict[int, Any] = field(default_factory=dict)  # worker -> its infos, where they
     # were all it had to add to its rows (``split_infos``)
-    joined: dict[str, Any] | None = None  # every env's infos as one vector info, where every
-    # worker wrote them as rows of one schema (:mod:`chronogym.vector.info_rows`)
+    rows: tuple[InfoSchema, np.ndarray] | None = None  # every env's infos as records of one
+    # schema, where every worker wrote them so (:mod:`chronogym.vector.info_rows`; a view of
+    # the block: read it before the next step)
 
     def outcome(self, w: int, lo: int, hi: int) -> Outcome:
         """Worker ``w``'s answer as the socket path gives it (rows ``lo:hi``)."""
@@ -376,7 +377,7 @@ class SharedStep:
             texts = v.tails.reshape(workers, lay.tail_bytes)[:, :size]
             if workers == 1 or ((sizes == size).all() and (texts == texts[0]).all()):
                 schema = self._schemas.schema(texts[0].tobytes())
-                answers.joined = join_rows(schema, v.info_rows, lay.num_envs)
+                answers.rows = (schema, records_in(v.info_rows, schema, lay.num_envs))
                 return
         for w in rows.tolist():
             if w in answers.extras:

@@ -11,8 +11,10 @@ relays (:mod:`chronogym.vector.relay`) holds such a block for its node's workers
 2. the driver's own block for the workers on its node, if it has any;
 3. one copy of each node's returned rows into the batch.
 
-The driver does nothing per worker, except for a worker with more to say (infos,
-restarts, an env's error, a loss), whose answer comes whole, as over its socket. A relay
+The driver does nothing per worker, except for a worker with more to say (restarts, an
+env's error, a loss, infos other than numeric scalars), whose answer comes whole, as over
+its socket. Numeric scalar infos come as each node's records of one schema
+(:mod:`chronogym.vector.info_rows`), and the driver copies each node's into the batch. A relay
 whose line or call fails (its node died) makes all of its workers lost.
 
 A :class:`SpreadStep` serves one placement of the workers. The backend marks it
@@ -31,9 +33,14 @@ from typing import Any
 import numpy as np
 
 from chronogym.vector.backend import Outcome
+from chronogym.vector.info_rows import INFO_ROW, InfoSchema, RowReader, unpack_node_rows
 from chronogym.vector.relay import LOST, Relays
-from chronogym.vector.relay_channel import DriverLine
+from chronogym.vector.relay_channel import ROWS, DriverLine
 from chronogym.vector.shared_step import SharedAnswers, SharedLayout, SharedStep
+
+#: One node's infos as records of one schema: the node, the schema, and its records as a
+#: ``(the node's envs, schema.used)`` uint8 array in the order of its block
+NodeInfos = tuple["NodeRows", InfoSchema, np.ndarray]
 
 #: the driver's node in :class:`NodeRows` (a relay's node is its Ray node id)
 HERE = ""
@@ -89,6 +96,7 @@ class SpreadStep:
         self.lines: dict[str, DriverLine] = {}  # node -> its relay's TCP line (else Ray calls)
         self.stale = False  # a worker was lost or replaced: open a new one
         self.steps = 0
+        self._schemas = RowReader()
 
     @classmethod
     def open(
@@ -119,7 +127,7 @@ class SpreadStep:
         step = cls(here, remote, obs_row)
         try:
             if here is not None:
-                layout = SharedLayout(tuple(here.slices), action_row, obs_row)
+                layout = SharedLayout(tuple(here.slices), action_row, obs_row, info_row=INFO_ROW)
                 step.local = SharedStep(
                     layout, options["directory"], options["spin_s"], options["tree"]
                 )
@@ -192,6 +200,8 @@ class SpreadStep:
         rewards = np.zeros(n, np.float64)
         terminations, truncations = np.zeros(n, np.bool_), np.zeros(n, np.bool_)
         extras: dict[int, Outcome] = {}
+        infos: dict[int, Any] = {}  # worker -> its infos as columns (a few workers only)
+        nodes: list[NodeInfos] = []
         if self.here is not None and self.local is not None:
             here = self.here
             got = self.local.step(
@@ -200,10 +210,16 @@ class SpreadStep:
                 deadline,
                 lambda i, error: handlers.lost(here.workers[i], error),
                 lambda i, when: handlers.read(here.workers[i], when),
+                split_infos=True,
             )
             obs[here.rows], rewards[here.rows] = got.obs, got.rewards
             terminations[here.rows], truncations[here.rows] = got.terminations, got.truncations
             extras.update({here.workers[i]: outcome for i, outcome in got.extras.items()})
+            infos.update({here.workers[i]: part for i, part in got.infos.items()})
+            if got.rows is not None:
+                schema, records = got.rows
+                block = records.view(np.uint8).reshape(len(records), INFO_ROW)
+                nodes.append((here, schema, block[:, : schema.used]))
         for group, way in zip(self.remote, sent, strict=True):
             try:
                 if isinstance(way, BaseException):
@@ -226,8 +242,14 @@ class SpreadStep:
             obs[group.rows], rewards[group.rows] = got_obs, got_rewards
             terminations[group.rows], truncations[group.rows] = got_terminations, got_truncations
             for w, kind, value in more:
-                extras[w] = handlers.relayed(w, (kind, value))
-        return SharedAnswers(obs, rewards, terminations, truncations, extras)
+                if kind == ROWS:
+                    nodes.append((group, *unpack_node_rows(self._schemas, value, len(group.rows))))
+                else:
+                    extras[w] = handlers.relayed(w, (kind, value))
+        answers = SharedAnswers(obs, rewards, terminations, truncations, extras, infos)
+        if nodes:
+            _take_node_rows(nodes, answers, n)
+        return answers
 
     def close(self, relays: Relays | None) -> None:
         """Close the driver's block and ask every relay to close its own."""
@@ -242,3 +264,25 @@ class SpreadStep:
             if actor is not None:
                 with contextlib.suppress(Exception):
                     actor.close_shared.remote()
+
+
+def _take_node_rows(nodes: list[NodeInfos], answers: SharedAnswers, num_envs: int) -> None:
+    """The nodes' infos records into ``answers``: one batch of records when every env's came
+    in one schema and no worker has more to say (each node's copied into the batch at its
+    rows), else each worker's columns, as its tail slot would have held them."""
+    schema = nodes[0][1]
+    covered = sum(len(group.rows) for group, _, _ in nodes)
+    one_schema = all(other.text == schema.text for _, other, _ in nodes)
+    if covered == num_envs and one_schema and not answers.extras and not answers.infos:
+        batch = np.empty((num_envs, schema.used), np.uint8)
+        for group, _, block in nodes:
+            batch[group.rows] = block
+        answers.rows = (schema, batch.view(schema.packed).reshape(num_envs))
+        return
+    for group, node_schema, block in nodes:
+        for i, w in enumerate(group.workers):
+            if w in answers.extras:
+                continue
+            lo, hi = group.slices[i]
+            records = np.ascontiguousarray(block[lo:hi]).view(node_schema.packed)
+            answers.infos[w] = node_schema.columns(records.reshape(hi - lo))

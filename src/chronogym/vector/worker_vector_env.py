@@ -72,6 +72,7 @@ from chronogym.vector.env_errors import (
 )
 from chronogym.vector.group import resolve_env_id
 from chronogym.vector.in_flight import CallKind, InFlight, PendingCall
+from chronogym.vector.info_rows import join_rows
 from chronogym.vector.infos import InfoColumns, batch_infos, join_infos
 from chronogym.vector.last_obs import LastObs
 from chronogym.vector.profile import StepProfile, now
@@ -401,7 +402,7 @@ class WorkerVectorEnv(VectorEnv):
         kept = answers.obs.view(obs_space.dtype).reshape(self.num_envs, *obs_space.shape)  # type: ignore[misc]
         kept.flags.writeable = False
         self._last_parts.set_all(kept, self._slices)
-        infos = answers.joined or {}
+        infos = join_rows(*answers.rows) if answers.rows is not None else {}
         if answers.infos:  # the workers' infos, as the socket path joins them
             parts = [answers.infos.get(w) for w in range(self.num_workers)]
             infos = join_infos(parts, [hi - lo for lo, hi in self._slices])
