@@ -1,0 +1,172 @@
+"""Vector envs of one workload side by side, round by round: wall, driver and worker CPU.
+
+On a noisy machine (the 2-core VMs here swing by up to 1.5x within minutes), two runs of one
+vector env minutes apart differ more than two vector envs do. This script builds every kind
+at once and steps them in turn, round by round, the order alternating, so that each round's
+noise falls on all of them:
+
+- ``fork``: ``RayVectorEnv(transport="fork")``, W workers of ``--envs-per-worker`` envs;
+- ``socket``: ``RayVectorEnv`` with Ray workers (its default transport; needs Ray);
+- ``async``: Gymnasium's ``AsyncVectorEnv``, one process per env;
+- ``sync``: Gymnasium's ``SyncVectorEnv``, every env in the driver.
+
+Per kind and W: the wall time, the driver process's CPU and its workers' CPU (``/proc``) per
+vector step, medians over the rounds; and each kind's wall time over the first kind's, round
+by round (its median and range: a kind ahead in every round is ahead, whatever the noise).
+
+    python -m benchmarks.vector.side_by_side --env Ant-v5 --workers 1 4 --kinds fork async
+
+Output: a table and JSON (default ``benchmarks/results/side_by_side.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.common import (
+    RESULTS,
+    Column,
+    header,
+    positive_int,
+    proc_cpu_s,
+    settings,
+    table,
+    write_json,
+)
+
+DEFAULT_OUT = RESULTS / "side_by_side.json"
+KINDS = ("fork", "socket", "async", "sync")
+ACTION_ROWS = 64
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="Ant-v5", help="a Gymnasium id with a Box action space")
+    parser.add_argument("--workers", type=positive_int, nargs="+", default=[1])
+    parser.add_argument("--envs-per-worker", type=positive_int, default=1)
+    parser.add_argument("--kinds", choices=KINDS, nargs="+", default=["fork", "async"])
+    parser.add_argument("--rounds", type=positive_int, default=7)
+    parser.add_argument("--steps", type=positive_int, default=1000, help="timed per round")
+    parser.add_argument("--warmup", type=positive_int, default=50, help="untimed per round")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    args = parser.parse_args(argv)
+    if len(set(args.kinds)) != len(args.kinds):
+        parser.error(f"--kinds {' '.join(args.kinds)}: each kind once")
+    return args
+
+
+def build(kind: str, env_id: str, num_envs: int, envs_per_worker: int) -> Any:
+    """A vector env of ``kind`` (NextStep autoreset, as every kind's default)."""
+    import gymnasium as gym
+    from gymnasium.vector import AutoresetMode
+
+    if kind in ("fork", "socket"):
+        from chronogym import RayVectorEnv
+
+        transport = {"fork": "fork", "socket": None}[kind]
+        return RayVectorEnv(env_id, num_envs, envs_per_worker=envs_per_worker, transport=transport)
+    mode = {"async": "async", "sync": "sync"}[kind]
+    return gym.make_vec(
+        env_id, num_envs, vectorization_mode=mode,
+        vector_kwargs={"autoreset_mode": AutoresetMode.NEXT_STEP},
+    )  # fmt: skip
+
+
+def worker_pids(kind: str, vec: Any) -> list[int]:
+    """The processes that step the envs, besides the driver."""
+    if kind == "async":
+        return [p.pid for p in vec.processes]
+    if kind == "sync":
+        return []
+    return [pid for pid in vec.worker_pids() if pid != os.getpid()]
+
+
+def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
+    """Every kind at ``workers`` workers, round by round."""
+    num_envs = workers * args.envs_per_worker
+    vecs = {k: build(k, args.env, num_envs, args.envs_per_worker) for k in args.kinds}
+    samples: dict[str, list[tuple[float, float, float]]] = {k: [] for k in vecs}
+    try:
+        rng = np.random.default_rng(0)
+        first = next(iter(vecs.values()))
+        low, high = first.single_action_space.low, first.single_action_space.high
+        shape = (ACTION_ROWS, num_envs, *first.single_action_space.shape)
+        actions = rng.uniform(low, high, shape).astype(first.single_action_space.dtype)
+        for vec in vecs.values():
+            vec.reset(seed=0)
+        for r in range(args.rounds):
+            order = list(vecs) if r % 2 == 0 else list(reversed(vecs))
+            for kind in order:
+                samples[kind].append(step_round(kind, vecs[kind], actions, args))
+            print(f"  W={workers} round {r + 1}/{args.rounds}: " + ", ".join(
+                f"{k} {samples[k][-1][0]:,.0f} µs" for k in vecs
+            ), flush=True)  # fmt: skip
+    finally:
+        for vec in vecs.values():
+            vec.close()
+    base = args.kinds[0]
+    rows = []
+    for kind, got in samples.items():
+        ratios = [s[0] / b[0] for s, b in zip(got, samples[base], strict=True)]
+        rows.append({
+            "kind": kind, "workers": workers, "envs_per_worker": args.envs_per_worker,
+            "wall_us": statistics.median(s[0] for s in got),
+            "driver_cpu_us": statistics.median(s[1] for s in got),
+            "worker_cpu_us": statistics.median(s[2] for s in got),
+            "wall_over_first": statistics.median(ratios),
+            "wall_over_first_range": [min(ratios), max(ratios)],
+            "rounds": [list(s) for s in got],
+        })  # fmt: skip
+    return rows
+
+
+def step_round(
+    kind: str, vec: Any, actions: np.ndarray, args: argparse.Namespace
+) -> tuple[float, float, float]:
+    """One round of ``vec``: (wall, driver CPU, workers' CPU) µs per vector step."""
+    for t in range(args.warmup):
+        vec.step(actions[t % ACTION_ROWS])
+    pids = worker_pids(kind, vec)
+    workers_before = sum(proc_cpu_s(pid) for pid in pids)
+    cpu, start = time.process_time(), time.perf_counter()
+    for t in range(args.steps):
+        vec.step(actions[t % ACTION_ROWS])
+    wall = time.perf_counter() - start
+    cpu = time.process_time() - cpu
+    workers = sum(proc_cpu_s(pid) for pid in pids) - workers_before
+    return tuple(1e6 * x / args.steps for x in (wall, cpu, workers))  # type: ignore[return-value]
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    started = time.perf_counter()
+    print(f"side_by_side: {args.env}, kinds {' '.join(args.kinds)}, W {args.workers}, "
+          f"{args.rounds} rounds of {args.steps} steps")  # fmt: skip
+    rows = [row for w in args.workers for row in measure(args, w)]
+    first = args.kinds[0]
+    cells = [
+        (r["kind"], r["workers"], r["wall_us"], r["driver_cpu_us"], r["worker_cpu_us"],
+         r["wall_over_first"], "{:.2f}-{:.2f}".format(*r["wall_over_first_range"]))
+        for r in rows
+    ]  # fmt: skip
+    print(table([
+        Column("kind", 8, align="<"), Column("W", 4), Column("wall µs", 10, "{:,.0f}"),
+        Column("driver CPU µs", 14, "{:,.0f}"), Column("workers' CPU µs", 16, "{:,.0f}"),
+        Column(f"wall / {first}", 12, "{:.3f}"), Column("range", 12),
+    ], cells, rule=True))  # fmt: skip
+    record = {**header("side_by_side"), "settings": settings(args), "rows": rows,
+              "seconds_in_all": time.perf_counter() - started}  # fmt: skip
+    write_json(args.out, record)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
