@@ -22,6 +22,7 @@ Output: a table and JSON (default ``benchmarks/results/side_by_side.json``).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import sys
@@ -50,6 +51,7 @@ ACTION_ROWS = 64
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Ant-v5", help="a Gymnasium id with a Box action space")
+    parser.add_argument("--env-kwargs", type=json.loads, default={}, help="the env's kwargs, JSON")
     parser.add_argument("--workers", type=positive_int, nargs="+", default=[1])
     parser.add_argument("--envs-per-worker", type=positive_int, default=1)
     parser.add_argument("--kinds", choices=KINDS, nargs="+", default=["fork", "async"])
@@ -63,7 +65,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def build(kind: str, env_id: str, num_envs: int, envs_per_worker: int) -> Any:
+def build(
+    kind: str, env_id: str, num_envs: int, envs_per_worker: int, env_kwargs: dict[str, Any]
+) -> Any:
     """A vector env of ``kind`` (NextStep autoreset, as every kind's default)."""
     import gymnasium as gym
     from gymnasium.vector import AutoresetMode
@@ -72,11 +76,14 @@ def build(kind: str, env_id: str, num_envs: int, envs_per_worker: int) -> Any:
         from chronogym import RayVectorEnv
 
         transport = {"fork": "fork", "socket": None}[kind]
-        return RayVectorEnv(env_id, num_envs, envs_per_worker=envs_per_worker, transport=transport)
+        return RayVectorEnv(
+            env_id, num_envs, envs_per_worker=envs_per_worker, transport=transport,
+            env_kwargs=env_kwargs,
+        )  # fmt: skip
     mode = {"async": "async", "sync": "sync"}[kind]
     return gym.make_vec(
         env_id, num_envs, vectorization_mode=mode,
-        vector_kwargs={"autoreset_mode": AutoresetMode.NEXT_STEP},
+        vector_kwargs={"autoreset_mode": AutoresetMode.NEXT_STEP}, **env_kwargs,
     )  # fmt: skip
 
 
@@ -92,7 +99,9 @@ def worker_pids(kind: str, vec: Any) -> list[int]:
 def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
     """Every kind at ``workers`` workers, round by round."""
     num_envs = workers * args.envs_per_worker
-    vecs = {k: build(k, args.env, num_envs, args.envs_per_worker) for k in args.kinds}
+    vecs = {
+        k: build(k, args.env, num_envs, args.envs_per_worker, args.env_kwargs) for k in args.kinds
+    }
     samples: dict[str, list[tuple[float, float, float]]] = {k: [] for k in vecs}
     try:
         rng = np.random.default_rng(0)

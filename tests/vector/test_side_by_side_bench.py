@@ -12,8 +12,9 @@ from benchmarks.vector.side_by_side import main, parse_args
 
 def test_kinds_are_stepped_round_by_round_and_related_to_the_first(tmp_path):
     out = tmp_path / "side.json"
-    argv = ["--env", "chronogym/Synthetic-v0", "--kinds", "fork", "sync", "--workers", "1", "2",
-            "--rounds", "2", "--steps", "20", "--warmup", "2", "--out", str(out)]  # fmt: skip
+    argv = ["--env", "chronogym/Synthetic-v0", "--env-kwargs", '{"step_ms": 1.5}', "--kinds",
+            "fork", "sync", "--workers", "1", "2", "--rounds", "2", "--steps", "20", "--warmup",
+            "2", "--out", str(out)]  # fmt: skip
     assert main(argv) == 0
     rows = json.loads(out.read_text())["rows"]
     assert [(r["kind"], r["workers"]) for r in rows] == [
@@ -23,7 +24,7 @@ def test_kinds_are_stepped_round_by_round_and_related_to_the_first(tmp_path):
         ("sync", 2),
     ]
     for row in rows:
-        assert len(row["rounds"]) == 2 and row["wall_us"] > 900  # each env step sleeps 1 ms
+        assert len(row["rounds"]) == 2 and row["wall_us"] > 1400  # each env step sleeps 1.5 ms
         low, high = row["wall_over_first_range"]
         assert low <= row["wall_over_first"] <= high
     assert all(r["wall_over_first"] == 1.0 for r in rows if r["kind"] == "fork")
