@@ -279,3 +279,14 @@ def positive_float(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a number > 0")
     return value
+
+
+def json_object(text: str) -> dict[str, Any]:
+    """An argparse type: a JSON object (keyword arguments), e.g. ``'{"step_ms": 10}'``."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"{text!r}: not JSON ({error})") from error
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a JSON object, e.g. '{{}}'")
+    return value

@@ -22,7 +22,6 @@ Output: a table and JSON (default ``benchmarks/results/side_by_side.json``).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -36,6 +35,7 @@ from benchmarks.common import (
     RESULTS,
     Column,
     header,
+    json_object,
     positive_int,
     proc_cpu_s,
     settings,
@@ -51,7 +51,7 @@ ACTION_ROWS = 64
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="Ant-v5", help="a Gymnasium id with a Box action space")
-    parser.add_argument("--env-kwargs", type=json.loads, default={}, help="the env's kwargs, JSON")
+    parser.add_argument("--env-kwargs", type=json_object, default={}, help="the env's kwargs, JSON")
     parser.add_argument("--workers", type=positive_int, nargs="+", default=[1])
     parser.add_argument("--envs-per-worker", type=positive_int, default=1)
     parser.add_argument("--kinds", choices=KINDS, nargs="+", default=["fork", "async"])

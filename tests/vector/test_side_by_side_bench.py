@@ -34,3 +34,10 @@ def test_kinds_are_stepped_round_by_round_and_related_to_the_first(tmp_path):
 def test_a_kind_named_twice_is_refused():
     with pytest.raises(SystemExit):
         parse_args(["--kinds", "fork", "fork"])
+
+
+@pytest.mark.parametrize("text", ["{step_ms: 1}", "[1, 2]"])
+def test_env_kwargs_that_are_no_json_object_are_refused_by_value(text, capsys):
+    with pytest.raises(SystemExit):
+        parse_args(["--env-kwargs", text])
+    assert repr(text) in capsys.readouterr().err

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from chronogym.vector.infos import PYTHON, InfoColumns, is_scalar_type
+from chronogym.vector.infos import PYTHON, InfoColumns, is_scalar_type, masked
 
 INFO_ROW = 256  # bytes of the block's info area per env: 32 eight-byte scalars
 TEXT = struct.Struct("<I")  # a node's rows (:func:`pack_node_rows`): the schema text's length
@@ -99,25 +99,18 @@ class RowWriter:
     def records(self, infos: list[dict[str, Any]]) -> np.ndarray | None:
         """The infos as records of :attr:`schema` (renewed when the first env's differs);
         None when they fit no one schema, or are all empty (then: the tail slot, as before)."""
-        first = infos[0] if infos else None
-        if not first:
+        if not infos or not infos[0]:
             return None
-        schema = self.schema
-        if (
-            schema is None
-            or tuple(first) != schema.keys
-            or self._types != tuple(map(type, first.values()))
-        ):
-            schema = self._renew(first)
-            if schema is None:
-                return None
-        keys, types = schema.keys, self._types
-        rows = []
+        schema, rows = self.schema, []
         for info in infos:
             values = tuple(info.values())
-            if tuple(info) != keys or tuple(map(type, values)) != types:
+            fits = schema is not None and tuple(info) == schema.keys
+            if not (fits and tuple(map(type, values)) == self._types) and (
+                rows or (schema := self._renew(info)) is None  # only the first env renews
+            ):
                 return None
             rows.append(values)
+        assert schema is not None
         try:
             return np.array(rows, dtype=schema.dtype)
         except (OverflowError, ValueError, TypeError):  # e.g. an int beyond int64
@@ -170,10 +163,4 @@ def unpack_node_rows(reader: RowReader, data: bytes, count: int) -> tuple[InfoSc
 def join_rows(schema: InfoSchema, records: np.ndarray) -> dict[str, Any]:
     """Every env's infos, records of one schema (its ``dtype`` or ``packed``), as one
     Gymnasium vector info."""
-    num_envs = len(records)
-    masks = np.ones((len(schema.keys), num_envs), dtype=np.bool_)
-    out: dict[str, Any] = {}
-    for key, mask in zip(schema.keys, masks, strict=True):
-        out[key] = records[key].copy()
-        out["_" + key] = mask
-    return out
+    return masked(schema.keys, [records[key].copy() for key in schema.keys], len(records))

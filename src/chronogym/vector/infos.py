@@ -120,7 +120,6 @@ def _join_columns(parts: Sequence[InfoColumns]) -> dict[str, Any]:
     """
     total = sum(p.count for p in parts)
     keys, kinds = parts[0].keys, parts[0].kinds
-    masks = list(np.ones((len(keys), total), dtype=np.bool_))
     rows_of: dict[str, list[int]] = {}
     for k, kind in enumerate(kinds):
         rows_of.setdefault(kind, []).append(k)
@@ -130,6 +129,13 @@ def _join_columns(parts: Sequence[InfoColumns]) -> dict[str, Any]:
         block = np.frombuffer(joined, dtype=kind.removeprefix(PYTHON)).reshape(len(ks), total)
         for k, column in zip(ks, block.copy(), strict=True):
             columns[k] = column
+    return masked(keys, columns, total)
+
+
+def masked(keys: Sequence[str], columns: Sequence[np.ndarray], num_envs: int) -> dict[str, Any]:
+    """Every env's values of each key as Gymnasium's vector info: the key's column, then its
+    all-True ``_key`` mask (the masks are the rows of one array)."""
+    masks = np.ones((len(keys), num_envs), dtype=np.bool_)
     out: dict[str, Any] = {}
     for key, column, mask in zip(keys, columns, masks, strict=True):
         out[key] = column
