@@ -69,6 +69,29 @@ def test_infos_of_every_size_come_back(ray_cluster, info_floats):
         vec.close()
 
 
+@pytest.mark.parametrize("transport", ["socket", "fork"])
+def test_profiled_steps_time_the_shared_block(ray_cluster, transport):
+    """profile_steps() times the path step takes: the block, with each worker's compute
+    read from it; the numbers stay serial's, and the workers stop timing once it is off."""
+    kwargs = {"step_ms": 2.0, "max_steps": 7, "info_scalars": 2}
+    serial = SerialVectorEnv(SYNTHETIC_ID, 4, envs_per_worker=2, env_kwargs=kwargs)
+    vec = RayVectorEnv(SYNTHETIC_ID, 4, envs_per_worker=2, env_kwargs=kwargs, transport=transport)
+    try:
+        profile = vec.profile_steps()
+        assert_same_rollouts(synthetic_rollout(vec, 12), synthetic_rollout(serial, 12))
+        assert shared_steps(vec) == 12 and profile.steps == 12
+        times = profile.per_step_us()
+        assert times["compute"] > 1000  # two envs of 2 ms each per worker, timed there
+        assert times["compute_sum"] > 1.5 * times["compute"]  # both workers reported
+        assert times["wait"] >= times["compute"] > 0 and times["get"] > 0
+        vec.profile_steps(enabled=False)
+        vec.step(np.zeros((4, 2), np.float32))
+        assert shared_steps(vec) == 13 and profile.steps == 12
+        assert vec._backend._shared.views.timed[0] == 0
+    finally:
+        vec.close()
+
+
 def test_a_worker_killed_between_shared_steps_is_replaced_and_attached(ray_cluster):
     vec = RayVectorEnv(ENV_ID, 4, envs_per_worker=2)
     try:

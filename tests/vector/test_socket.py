@@ -107,11 +107,13 @@ def test_send_recv_over_sockets_match_sync_per_env(ray_cluster, spin_us, plain_w
 
 
 def test_profiled_steps_go_over_sockets_too(ray_cluster):
-    vec = socket_env(ENV_ID, NUM_ENVS, envs_per_worker=2)
+    """Messages only (shared memory off): each worker's times come with its answer."""
+    vec = socket_env(ENV_ID, NUM_ENVS, envs_per_worker=2, shared_memory=False)
     try:
         profile = vec.profile_steps()
         vector_rollout(vec, 10)
         times = profile.per_step_us()
+        assert vec._backend._shared is None
         assert profile.steps == 10 and times["compute"] > 0 and times["wait"] > 0
         vec.profile_steps(enabled=False)
         obs, *_ = vec.step(np.zeros((NUM_ENVS, 1), dtype=np.float32))

@@ -3,6 +3,8 @@
 Off by default. ``vec.profile_steps()`` attaches a :class:`StepProfile`; every
 following ``step`` adds its driver-side phases, and each worker (Box spaces,
 packed path) reports its own compute and (de)serialization time with its result.
+The step profiled is the one ``step`` takes: the shared-memory block of the driver's
+node where it is on (each worker's times in the block), else one message per worker.
 """
 
 from __future__ import annotations
@@ -32,6 +34,10 @@ class StepProfile:
     serde: float = 0.0
     compute_sum: float = 0.0
 
+    def add_timer(self, timer: StepTimer) -> None:
+        """One step timed by ``timer`` (all its phases marked)."""
+        self.add(timer.marks, timer.workers)
+
     def add(self, marks: list[float], worker_times: list[tuple[float, float]]) -> None:
         """One step: ``marks`` = perf_counter at its 6 phase boundaries; (serde, compute) each."""
         for name, start, end in zip(PHASES, marks, marks[1:], strict=False):
@@ -58,6 +64,19 @@ class StepProfile:
         out["driver"] = sum(out[name] for name in PHASES if name != "wait")
         out["total"] = sum(out[name] for name in PHASES)
         return out
+
+
+@dataclass
+class StepTimer:
+    """One profiled step under way: its phase boundaries so far (started when made) and
+    each answering worker's (serde, compute) seconds."""
+
+    marks: list[float] = field(default_factory=lambda: [now()])
+    workers: list[tuple[float, float]] = field(default_factory=list)
+
+    def mark(self) -> None:
+        """The current phase ends now."""
+        self.marks.append(now())
 
 
 def now() -> float:

@@ -144,9 +144,10 @@ class RayVectorEnv(WorkerVectorEnv):
             its node, each other node's relay's for that node, one message
             per node (:mod:`chronogym.vector.spread_step`), so the driver's
             CPU per worker no longer holds a message each way; ``send`` /
-            ``recv`` and ``profile_steps()`` still use one socket message per
-            worker. Default True; False: messages only. Same numbers either
-            way.
+            ``recv`` still use one socket message per worker, and so does
+            ``profile_steps()`` with workers on other nodes (on the driver's
+            node it times the block). Default True; False: messages only.
+            Same numbers either way.
         relay_tcp: ``transport="socket"`` or ``"fork"`` with workers on other nodes only:
             each node's relay answers the shared-memory barrier ``step`` over
             a direct TCP connection to the driver, not a Ray call per node

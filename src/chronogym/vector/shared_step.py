@@ -44,10 +44,12 @@ per step with one worker and 48 µs with eight on a 2-core VM:
 pickled: a worker whose envs report the same numeric scalars writes them as records into its
 envs' rows of the block's info area (status ``INFO_ROWS``, :mod:`chronogym.vector.info_rows`),
 and when every worker did so with one schema the driver copies each key's column out of the
-area, with nothing per worker. A worker that dies shows as a hung-up socket, one
-silent past ``step_timeout`` as lost: both are replaced by the socket transport as
-before. The same :class:`~chronogym.vector.group.EnvGroup` call
-(``step_packed``) makes the bytes either way, so the numbers are the socket path's.
+area, with nothing per worker. A step the driver marks as timed (``profile_steps()``) has
+each worker write its serde and compute seconds into its slot of the block's ``timings``.
+A worker that dies shows as a hung-up socket, one silent past ``step_timeout`` as lost:
+both are replaced by the socket transport as before. The same
+:class:`~chronogym.vector.group.EnvGroup` call (``step_packed``) makes the bytes either
+way, so the numbers are the socket path's.
 """
 
 from __future__ import annotations
@@ -69,6 +71,7 @@ import numpy as np
 from chronogym.vector.backend import Outcome, StepAnswer
 from chronogym.vector.info_rows import INFO_ROW, InfoSchema, RowReader, RowWriter, records_in
 from chronogym.vector.infos import to_columns
+from chronogym.vector.profile import StepTimer
 from chronogym.vector.wire_format import (
     ANSWER,
     OK,
@@ -109,6 +112,7 @@ class SharedLayout:
         sizes = {
             "gen": 8,
             "count": 16,  # the step whose answers are counted, and how many came
+            "timed": 8,  # 1: the driver profiles this step (profile_steps()); workers time it
             "actions": n * self.action_row,
             "obs": n * self.obs_row,
             "rewards": 8 * n,
@@ -116,6 +120,7 @@ class SharedLayout:
             "truncations": n,
             "done": 8 * w,
             "status": 8 * w,  # per worker: uint32 status, uint32 tail length
+            "timings": 16 * w,  # per worker, of a timed step: seconds of serde, of compute
             "tails": w * self.tail_bytes,
             "info_rows": n * self.info_row,
         }
@@ -142,6 +147,7 @@ class SharedViews:
         self.buf = buf
         self.gen = np.frombuffer(buf, np.uint64, 1, o["gen"])
         self.count = np.frombuffer(buf, np.uint64, 2, o["count"])
+        self.timed = np.frombuffer(buf, np.uint64, 1, o["timed"])
         self.actions = np.frombuffer(buf, np.uint8, n * layout.action_row, o["actions"])
         self.obs = np.frombuffer(buf, np.uint8, n * layout.obs_row, o["obs"])
         self.rewards = np.frombuffer(buf, np.float64, n, o["rewards"])
@@ -149,6 +155,7 @@ class SharedViews:
         self.truncations = np.frombuffer(buf, np.bool_, n, o["truncations"])
         self.done = np.frombuffer(buf, np.uint64, w, o["done"])
         self.status = np.frombuffer(buf, np.uint32, 2 * w, o["status"]).reshape(w, 2)
+        self.timings = np.frombuffer(buf, np.float64, 2 * w, o["timings"]).reshape(w, 2)
         self.tails = np.frombuffer(buf, np.uint8, w * layout.tail_bytes, o["tails"])
         self.info_rows = np.frombuffer(buf, np.uint8, n * layout.info_row, o["info_rows"])
 
@@ -317,21 +324,33 @@ class SharedStep:
         read: Any,
         decode: Any = None,
         split_infos: bool = False,
+        timer: StepTimer | None = None,
     ) -> SharedAnswers:
         """One barrier step of every worker. ``lost(w, error)`` gives a lost worker's Outcome;
         ``read(w, deadline)`` reads an answer sent on worker ``w``'s socket; ``decode(w,
         view)`` an answer found in worker ``w``'s tail slot (default: its Outcome; a relay
         keeps the raw bytes). ``split_infos``: a tail that adds only infos to the worker's
         rows (the common case: every Gymnasium MuJoCo task reports infos at every step) goes
-        to ``infos``, not ``extras``, so the caller keeps the whole-batch rows."""
+        to ``infos``, not ``extras``, so the caller keeps the whole-batch rows. ``timer``
+        (``profile_steps()``): the workers time their part, and the phases submit, wait and
+        get are marked."""
         v = self.views
         g = self.gen = self.gen + 1
         v.actions[:] = np.frombuffer(actions, np.uint8)
+        if timer is not None or v.timed[0]:
+            v.timed[0] = timer is not None
+            v.timings[:] = np.nan  # a worker that does not answer leaves no times
         v.gen[0] = g
         go = self._go[g % 2][1]
         os.write(go, b"\x01")
+        if timer is not None:
+            timer.mark()
         extras = self._wait(g, socks, deadline, lost)
         _drain(self._go[g % 2][0])
+        if timer is not None:
+            timer.mark()
+            answered = v.timings[~np.isnan(v.timings[:, 1])]
+            timer.workers = [(float(serde), float(compute)) for serde, compute in answered]
         obs = v.obs.reshape(self.layout.num_envs, self.layout.obs_row).copy()
         answers = SharedAnswers(
             obs, v.rewards.copy(), v.terminations.copy(), v.truncations.copy(), extras
@@ -486,15 +505,19 @@ class SharedServer:
         return int(self.views.gen[0]) > self.last
 
     def serve(self, step: Any) -> None:
-        """Answer the current step: ``step(action_bytes)`` gives a StepAnswer (its infos as
-        the envs gave them: a list of dicts) or a StepFailure."""
+        """Answer the current step: ``step(action_bytes, timed)`` gives a StepAnswer (its
+        infos as the envs gave them: a list of dicts; with ``timed``, its timings, which go
+        to this worker's slot of the block) or a StepFailure."""
         v, lo, hi, lay = self.views, self.lo, self.hi, self.layout
         g = int(v.gen[0])
         if self._fanout:  # a leader wakes its group first (its own step may be long)
             _drain(self._fanout[(g + 1) % 2])  # step g - 1's byte: every member is past it
             os.write(self._fanout[2 + g % 2], b"\x01")
-        answer = step(v.actions[lo * lay.action_row : hi * lay.action_row])
+        answer = step(v.actions[lo * lay.action_row : hi * lay.action_row], bool(v.timed[0]))
         status, size, message = PLAIN, 0, b""
+        if isinstance(answer, StepAnswer) and answer.timings is not None:
+            v.timings[self.w] = answer.timings
+            answer.timings = None
         if isinstance(answer, StepAnswer):
             v.obs[lo * lay.obs_row : hi * lay.obs_row] = np.frombuffer(answer.obs, np.uint8)
             v.rewards[lo:hi] = np.frombuffer(answer.rewards, np.float64)

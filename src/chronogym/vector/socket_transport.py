@@ -58,6 +58,7 @@ from chronogym.vector.actor_transport import ActorBackend, ActorGroup
 from chronogym.vector.backend import Outcome, gather_split
 from chronogym.vector.group import EnvGroup
 from chronogym.vector.info_rows import INFO_ROW
+from chronogym.vector.profile import StepTimer
 from chronogym.vector.relay import ANSWERED, LOST, SILENT, RelayHandle, Relays
 from chronogym.vector.shared_step import (
     ATTACH,
@@ -197,7 +198,7 @@ def _serve_conn(group: EnvGroup, conn: socket.socket, spin_s: float) -> None:
     head = memoryview(bytearray(REQUEST.size))
     data = memoryview(bytearray(256))
     plain, spinner = poller_of(conn), AdaptiveSpin(spin_s)
-    step_shared = functools.partial(_step_bytes, group, timed=False, raw_infos=True)
+    step_shared = functools.partial(_step_bytes, group, raw_infos=True)  # (bytes, timed)
     shared: SharedServer | None = None
     go_pollers: dict[int, select.poll] = {}
     try:
@@ -446,12 +447,20 @@ class SocketBackend(ActorBackend):
 
     # -- the shared-memory barrier step -------------------------------------------------------
     def shared_step(
-        self, actions: np.ndarray, slices: list[tuple[int, int]], obs_row: int
+        self,
+        actions: np.ndarray,
+        slices: list[tuple[int, int]],
+        obs_row: int,
+        timer: StepTimer | None = None,
     ) -> SharedAnswers | None:
         """A barrier step of every worker through shared memory
         (:mod:`chronogym.vector.shared_step`), for a caller whose :meth:`shares_steps` said
-        yes; None when the block cannot be opened (then: one socket message per worker)."""
+        yes; None when the block cannot be opened (then: one socket message per worker).
+        ``timer`` (``profile_steps()``) times the driver's node's block; None with workers
+        on other nodes (a profiled step then goes as messages)."""
         if not self._all_here:  # workers on other nodes: a block per node
+            if timer is not None:
+                return None
             return self._spread_step(actions, slices, obs_row)
         if self._spread is not None:  # every worker is on this node again
             self._close_spread()
@@ -460,7 +469,7 @@ class SocketBackend(ActorBackend):
         assert self._shared is not None
         deadline = None if self.step_timeout is None else time.monotonic() + self.step_timeout
         return self._shared.step(
-            actions, self._socks, deadline, self._lost, self._read, split_infos=True
+            actions, self._socks, deadline, self._lost, self._read, split_infos=True, timer=timer
         )
 
     def shares_steps(self) -> bool:

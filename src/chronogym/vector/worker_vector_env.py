@@ -75,7 +75,7 @@ from chronogym.vector.in_flight import CallKind, InFlight, PendingCall
 from chronogym.vector.info_rows import join_rows
 from chronogym.vector.infos import InfoColumns, batch_infos, join_infos
 from chronogym.vector.last_obs import LastObs
-from chronogym.vector.profile import StepProfile, now
+from chronogym.vector.profile import StepProfile, StepTimer
 
 logger = logging.getLogger("chronogym")
 
@@ -378,17 +378,24 @@ class WorkerVectorEnv(VectorEnv):
             raise error from error.__cause__
         return self._join_results(workers, parts)
 
-    def _shared_step(self, actions: Any) -> tuple | None:
+    def _shared_step(self, actions: Any, timer: StepTimer | None = None) -> tuple | None:
         """``step`` through the backend's shared memory, when it has it
         (:mod:`chronogym.vector.shared_step`): nothing per worker on the driver's side
-        unless a worker has infos, restarts or an error to report. None: not available."""
+        unless a worker has infos, restarts or an error to report. None: not available.
+        ``timer``: the phases up to ``get`` are marked (``join`` is the caller's)."""
         shares_steps = getattr(self._backend, "shares_steps", None)
         if shares_steps is None or not shares_steps():
             return None
         space = self.single_action_space
         array = prepare_box_action(actions, space, self.num_envs, self.invalid_action)  # type: ignore[arg-type]
         array = np.ascontiguousarray(array)
-        answers = self._backend.shared_step(array, self._slices, self._obs_row)  # type: ignore[attr-defined]
+        if timer is None:
+            answers = self._backend.shared_step(array, self._slices, self._obs_row)  # type: ignore[attr-defined]
+        else:
+            timer.mark()
+            answers = self._backend.shared_step(array, self._slices, self._obs_row, timer)  # type: ignore[attr-defined]
+            if answers is not None:
+                timer.mark()
         if answers is None:
             return None
         if answers.extras:  # infos, restarts, errors: each worker's answer, as over sockets
@@ -423,7 +430,11 @@ class WorkerVectorEnv(VectorEnv):
         return parts, seen
 
     def profile_steps(self, enabled: bool = True) -> StepProfile | None:
-        """Time every following ``step`` phase by phase (``enabled=False``: stop).
+        """Time every following ``step`` phase by phase (``enabled=False``: stop), on the
+        path ``step`` takes: the shared-memory block with every worker on the driver's node
+        (each worker writes its times into it), else one message per worker (the times
+        come with each answer; with workers on other nodes too, their profiled steps go
+        this way).
 
         Returns the :class:`~chronogym.vector.profile.StepProfile` that collects
         the timings (``per_step_us()`` gives the means), or None when disabled.
@@ -432,25 +443,33 @@ class WorkerVectorEnv(VectorEnv):
         return self.profile
 
     def _step_profiled(self, actions: Any, profile: StepProfile) -> tuple:
-        """``step`` with each phase timed into ``profile`` (same numbers as ``step``)."""
-        marks = [now()]
+        """``step`` with each phase timed into ``profile`` (same numbers as ``step``), on the
+        path ``step`` takes: the shared-memory block where the backend has one for every
+        worker on the driver's node, else one message per worker."""
+        if self._packed:
+            timer = StepTimer()
+            if (shared := self._shared_step(actions, timer)) is not None:
+                timer.mark()
+                profile.add_timer(timer)
+                return shared
+        timer = StepTimer()
         workers = list(range(self.num_workers))
         args = self._step_args(workers, actions)
-        marks.append(now())
+        timer.mark()
         handles = self._submit_all(workers, self._step_method, args)
-        marks.append(now())
+        timer.mark()
         self._backend.wait(handles, len(handles), None)
-        marks.append(now())
+        timer.mark()
         outcomes = self._backend.gather(workers, handles)
-        marks.append(now())
+        timer.mark()
         parts, seen = self._step_parts(workers, outcomes)
         if (error := self._env_error(seen)) is not None:
             raise error from error.__cause__
         out = self._join_results(workers, parts)
-        marks.append(now())
+        timer.mark()
         answers = [StepAnswer.of(o.value) for o in outcomes if o.ok]
-        timed = [a.timings for a in answers if a.timings is not None]
-        profile.add(marks, timed)
+        timer.workers = [a.timings for a in answers if a.timings is not None]
+        profile.add_timer(timer)
         return out
 
     @property
