@@ -241,6 +241,20 @@ def proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def proc_switches(pid: int) -> int:
+    """Context switches (voluntary and not) of every thread of process ``pid`` so far: each is
+    a wake-up of one of its threads, or a preemption (0 if the process is gone)."""
+    total = 0
+    try:
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            for line in (task / "status").read_text().splitlines():
+                if line.endswith("ctxt_switches", 0, line.find(":")):
+                    total += int(line.split(":")[1])
+    except FileNotFoundError:
+        return total
+    return total
+
+
 def cpu_percent(pids: list[int], run: Callable[[], Any]) -> dict[str, float]:
     """% of one core the ``pids`` (summed) and this process used while ``run()`` ran."""
     before = [proc_cpu_s(pid) for pid in pids]

@@ -13,6 +13,10 @@ noise falls on all of them:
 Per kind and W: the wall time, the driver process's CPU and its workers' CPU (``/proc``) per
 vector step, medians over the rounds; and each kind's wall time over the first kind's, round
 by round (its median and range: a kind ahead in every round is ahead, whatever the noise).
+After the rounds, with nothing stepping, each kind's *idle wake-ups*: the context switches
+per second of all its workers' threads over ``--idle-s`` (a Ray worker is a whole Ray core
+worker, whose threads keep waking while it waits; on a machine with fewer cores than
+workers each wake-up takes a core from a worker that steps).
 
     python -m benchmarks.vector.side_by_side --env Ant-v5 --workers 1 4 --kinds fork async
 
@@ -38,6 +42,7 @@ from benchmarks.common import (
     json_object,
     positive_int,
     proc_cpu_s,
+    proc_switches,
     settings,
     table,
     write_json,
@@ -58,8 +63,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--rounds", type=positive_int, default=7)
     parser.add_argument("--steps", type=positive_int, default=1000, help="timed per round")
     parser.add_argument("--warmup", type=positive_int, default=50, help="untimed per round")
+    parser.add_argument(
+        "--idle-s", type=float, default=2.0, help="seconds of idle wake-ups counted per W"
+    )
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
+    if not 0 < args.idle_s <= 60:
+        parser.error(f"--idle-s {args.idle_s}: expected seconds in (0, 60]")
     if len(set(args.kinds)) != len(args.kinds):
         parser.error(f"--kinds {' '.join(args.kinds)}: each kind once")
     return args
@@ -118,6 +128,7 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
             print(f"  W={workers} round {r + 1}/{args.rounds}: " + ", ".join(
                 f"{k} {samples[k][-1][0]:,.0f} µs" for k in vecs
             ), flush=True)  # fmt: skip
+        wakeups = idle_wakeups({k: worker_pids(k, v) for k, v in vecs.items()}, args.idle_s)
     finally:
         for vec in vecs.values():
             vec.close()
@@ -132,9 +143,21 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
             "worker_cpu_us": statistics.median(s[2] for s in got),
             "wall_over_first": statistics.median(ratios),
             "wall_over_first_range": [min(ratios), max(ratios)],
+            "idle_wakeups_per_s": wakeups[kind],
             "rounds": [list(s) for s in got],
         })  # fmt: skip
     return rows
+
+
+def idle_wakeups(pids: dict[str, list[int]], seconds: float) -> dict[str, float]:
+    """Per kind: context switches per second of all its workers' threads while nothing steps."""
+
+    def count() -> dict[str, int]:
+        return {k: sum(proc_switches(pid) for pid in p) for k, p in pids.items()}
+
+    before = count()
+    time.sleep(seconds)
+    return {k: (n - before[k]) / seconds for k, n in count().items()}
 
 
 def step_round(
@@ -163,13 +186,15 @@ def main(argv: list[str] | None = None) -> int:
     first = args.kinds[0]
     cells = [
         (r["kind"], r["workers"], r["wall_us"], r["driver_cpu_us"], r["worker_cpu_us"],
-         r["wall_over_first"], "{:.2f}-{:.2f}".format(*r["wall_over_first_range"]))
+         r["wall_over_first"], "{:.2f}-{:.2f}".format(*r["wall_over_first_range"]),
+         r["idle_wakeups_per_s"])
         for r in rows
     ]  # fmt: skip
     print(table([
         Column("kind", 8, align="<"), Column("W", 4), Column("wall µs", 10, "{:,.0f}"),
         Column("driver CPU µs", 14, "{:,.0f}"), Column("workers' CPU µs", 16, "{:,.0f}"),
         Column(f"wall / {first}", 12, "{:.3f}"), Column("range", 12),
+        Column("idle wake-ups/s", 16, "{:,.0f}"),
     ], cells, rule=True))  # fmt: skip
     record = {**header("side_by_side"), "settings": settings(args), "rows": rows,
               "seconds_in_all": time.perf_counter() - started}  # fmt: skip

@@ -4,17 +4,20 @@ workers and Gymnasium's vector envs, a short run)."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+import time
 
 import pytest
 
-from benchmarks.vector.side_by_side import main, parse_args
+from benchmarks.vector.side_by_side import idle_wakeups, main, parse_args
 
 
 def test_kinds_are_stepped_round_by_round_and_related_to_the_first(tmp_path):
     out = tmp_path / "side.json"
     argv = ["--env", "chronogym/Synthetic-v0", "--env-kwargs", '{"step_ms": 1.5}', "--kinds",
             "fork", "sync", "--workers", "1", "2", "--rounds", "2", "--steps", "20", "--warmup",
-            "2", "--out", str(out)]  # fmt: skip
+            "2", "--idle-s", "0.3", "--out", str(out)]  # fmt: skip
     assert main(argv) == 0
     rows = json.loads(out.read_text())["rows"]
     assert [(r["kind"], r["workers"]) for r in rows] == [
@@ -29,6 +32,25 @@ def test_kinds_are_stepped_round_by_round_and_related_to_the_first(tmp_path):
         assert low <= row["wall_over_first"] <= high
     assert all(r["wall_over_first"] == 1.0 for r in rows if r["kind"] == "fork")
     assert rows[0]["worker_cpu_us"] >= 0 and rows[1]["worker_cpu_us"] == 0  # sync: no workers
+    assert rows[1]["idle_wakeups_per_s"] == 0 and rows[0]["idle_wakeups_per_s"] >= 0
+
+
+def test_idle_wakeups_count_a_process_that_keeps_waking():
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time\nwhile True: time.sleep(0.005)"])
+    try:
+        time.sleep(0.3)
+        rate = idle_wakeups({"sleeper": [sleeper.pid], "none": []}, 0.5)
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    assert 50 < rate["sleeper"] < 400 and rate["none"] == 0  # ~200 wake-ups per second
+
+
+@pytest.mark.parametrize("seconds", ["0", "-1", "61"])
+def test_idle_seconds_out_of_range_are_refused(seconds, capsys):
+    with pytest.raises(SystemExit):
+        parse_args(["--idle-s", seconds])
+    assert f"--idle-s {float(seconds)}" in capsys.readouterr().err
 
 
 def test_a_kind_named_twice_is_refused():
