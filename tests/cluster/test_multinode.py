@@ -235,8 +235,9 @@ def test_scalar_infos_cross_the_nodes_as_rows_and_survive_a_lost_worker(
     cluster, monkeypatch, transport
 ):
     """Ant-v5's nine scalar infos, workers on every node: each node's infos come as records
-    of one schema (info_rows.py) and join to what a serial run gives, dtypes and all. With a
-    relayed worker killed, the other workers' infos still come, as columns each."""
+    of one schema (info_rows.py) and join to what a serial run gives, dtypes and all; profiled
+    steps go as messages, with every worker's times. With a relayed worker killed, the other
+    workers' infos still come, as columns each."""
     import os
     import signal
     import time
@@ -260,14 +261,19 @@ def test_scalar_infos_cross_the_nodes_as_rows_and_survive_a_lost_worker(
     vec = RayVectorEnv("Ant-v5", 6, address=cluster.address, transport=transport, **where,
                        **options)  # fmt: skip
     rng = np.random.default_rng(4)
-    actions = [rng.uniform(-1, 1, (6, 8)).astype(np.float32) for _ in range(12)]
+    actions = [rng.uniform(-1, 1, (6, 8)).astype(np.float32) for _ in range(14)]
     try:
         relayed = [w for w, on in enumerate(vec._backend.relayed()) if on]
         assert relayed, "no worker on another node"
-        got = [vec.reset(seed=2)] + [vec.step(a) for a in actions]
+        got = [vec.reset(seed=2)] + [vec.step(a) for a in actions[:12]]
         relays = vec._backend._relays
         nodes = len(set(relays.node_of.values())) + (len(relayed) < vec.num_workers)
         assert took[-10:] == [(nodes, True)] * 10 and nodes > 1
+        spread_steps, profile = vec._backend._spread.steps, vec.profile_steps()
+        got += [vec.step(a) for a in actions[12:]]
+        vec.profile_steps(enabled=False)
+        assert vec._backend._spread.steps == spread_steps and profile.steps == 2
+        assert profile.compute_sum > 0 and profile.per_step_us()["wait"] > 0
         os.kill(vec.worker_pids()[relayed[0]], signal.SIGKILL)
         time.sleep(0.3)
         _, _, _, truncated, info = vec.step(actions[0])
