@@ -332,8 +332,8 @@ class SharedStep:
         keeps the raw bytes). ``split_infos``: a tail that adds only infos to the worker's
         rows (the common case: every Gymnasium MuJoCo task reports infos at every step) goes
         to ``infos``, not ``extras``, so the caller keeps the whole-batch rows. ``timer``
-        (``profile_steps()``): the workers time their part, and the phases submit, wait and
-        get are marked."""
+        (``profile_steps()``): the workers time their part (``timer.workers``), and the ends
+        of the phases submit and wait are marked (the caller marks the rest)."""
         v = self.views
         g = self.gen = self.gen + 1
         v.actions[:] = np.frombuffer(actions, np.uint8)
