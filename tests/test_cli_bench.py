@@ -14,8 +14,13 @@ import pytest
 from chronogym.sizing import (
     SWEEP_ENVS_PER_WORKER,
     SWEEP_WORKERS,
+    BenchReport,
+    EnvProfile,
     StepModel,
+    Timed,
+    VectorRun,
     bench_workers,
+    cores_shared,
     fit_overhead,
     fit_overhead_nonnegative,
     info_sizes,
@@ -52,6 +57,10 @@ def test_bench_on_the_cart_pole_prints_table_and_recommendation():
     assert all(float(x) > 0 for row in rows for x in row[1:])
     fit = re.search(rf"a = {NUMBER} us \(fixed\), b = {NUMBER} us \(per worker\)", out)
     assert fit, out
+    if (os.cpu_count() or 1) <= 2:  # 2 workers and the driver on 2 CPUs: said after the fit
+        assert "W = 2 workers and the driver shared this machine's" in out or (
+            "W = 2 workers and the driver shared the cluster's" in out
+        ), out
     assert re.search(rf"check on the env itself, 2 workers: step {NUMBER} ms measured", out)
     table = re.findall(r"^  (\d+) +((?:\s+\d\.\d\d){5})$", out, re.M)
     assert [int(w) for w, _ in table] == list(SWEEP_WORKERS), out
@@ -124,6 +133,24 @@ def test_recommendation_is_one_worker_per_core_with_the_fewest_envs():
     assert bench_workers(cpus=2, max_workers=16) == [1, 2, 4]
     assert bench_workers(cpus=32, max_workers=8) == [1, 2, 4, 8]
     assert bench_workers(cpus=6, max_workers=3) == [1, 2, 3]
+
+
+def crowd_report(cpus: int, cores: int, workers: list[int]) -> BenchReport:
+    report = BenchReport(EnvProfile("my/Env-v0", 1e-4, 4, 100), 1e-4, cpus, cores, 0.8)
+    timed = Timed(100, 0.05, 0.02, 0.02)
+    report.runs = [VectorRun("synthetic", w, 1, 1e-4, 0.1, timed) for w in workers]
+    return report
+
+
+def test_a_fit_whose_workers_shared_the_driver_s_cores_says_so():
+    """On 2 CPUs the fit times 4 workers: b then holds their wait for a core, and a plan for
+    more cores made from it is pessimistic; with a core each besides the driver's, no word."""
+    crowded = cores_shared(crowd_report(2, 16, [1, 2, 4]))
+    assert crowded is not None and "W = 4 workers and the driver shared" in crowded
+    assert "2 CPUs" in crowded and "the plan for 16 cores is pessimistic" in crowded
+    same = cores_shared(crowd_report(2, 2, [1, 2, 4]))
+    assert same is not None and "pessimistic" not in same
+    assert cores_shared(crowd_report(8, 64, [1, 2, 4, 7])) is None
 
 
 def test_the_synthetic_env_copies_the_envs_info_sizes():

@@ -21,9 +21,11 @@ measured throughput over the ideal one (every worker computing all the time):
    *sleeps* ``s`` and whose observation and info have the env's sizes (its info's numeric
    scalars as float64 scalars, its other numeric values as one float array: infos cost the
    driver and the workers Python per step, Gymnasium's MuJoCo tasks nine scalars each). A
-   sleeping step releases its
-   core, so W workers measure the vector env's own cost even where W exceeds the cores: the
-   real env at W > cores would measure the cores' contention instead. What this leaves out
+   sleeping step releases its core, where the real env at W > cores would measure the
+   cores' contention; but each worker's own CPU per step (its serving loop and the step's
+   wake-up, ~0.1 ms on a small VM) does not sleep, so where W workers and the driver
+   outnumber the CPUs ``b`` holds their wait for a core, and the report says so
+   (:func:`cores_shared`): a plan for more cores made there is pessimistic. What this leaves out
    is what the workers' real compute does to each other on real cores (memory bandwidth,
    turbo, hyper-threads), so a last run checks the model on the real env at W = the CPUs
    (``--max-workers`` capped), where the cores can still run every worker at once.
@@ -412,6 +414,25 @@ def run_bench(
 # -- report ---------------------------------------------------------------------------------
 
 
+def cores_shared(report: BenchReport) -> str | None:
+    """A warning when the fit's largest W left the driver no core of its own: each worker's
+    own CPU per step (its serving loop, the step's wake-up) then queues for the cores, and
+    ``b`` holds that queueing, which more cores would not have (None: every W had room)."""
+    most = max(run.workers for run in report.runs)
+    if most + 1 <= report.cpus:
+        return None
+    text = (
+        f"  W = {most} workers and the driver shared {report.where}'s {report.cpus} CPUs: b holds "
+        "their wait for a core"
+    )
+    if report.cores > report.cpus:
+        text += (
+            f", so the plan for {report.cores} cores is pessimistic; run chronogym bench "
+            "where the run will be (--address for a cluster)"
+        )
+    return text
+
+
 def format_report(report: BenchReport) -> str:
     """The measurements, the efficiency table and the recommendation, as text."""
     model = report.model
@@ -437,6 +458,8 @@ def format_report(report: BenchReport) -> str:
         f"b = {model.b * 1e6:.1f} us (per worker); S = envs_per_worker x "
         f"{model.step_s * ms:.3f} ms",
     ]
+    if (crowded := cores_shared(report)) is not None:
+        lines.append(crowded)
     if report.check is not None:
         run = report.check
         predicted = model.t_step(run.workers)
