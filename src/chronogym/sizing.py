@@ -23,8 +23,8 @@ measured throughput over the ideal one (every worker computing all the time):
    driver and the workers Python per step, Gymnasium's MuJoCo tasks nine scalars each). A
    sleeping step releases its core, where the real env at W > cores would measure the
    cores' contention; but each worker's own CPU per step (its serving loop and the step's
-   wake-up, ~0.1 ms on a small VM) does not sleep, so where W workers and the driver
-   outnumber the CPUs ``b`` holds their wait for a core, and the report says so
+   wake-up, ~0.1 ms on a small VM) does not sleep, so where the W workers outnumber the
+   CPUs (W = 4 on 2 or 3) ``b`` holds their wait for a core, and the report says so
    (:func:`cores_shared`): a plan for more cores made there is pessimistic. What this leaves out
    is what the workers' real compute does to each other on real cores (memory bandwidth,
    turbo, hyper-threads), so a last run checks the model on the real env at W = the CPUs
@@ -415,15 +415,16 @@ def run_bench(
 
 
 def cores_shared(report: BenchReport) -> str | None:
-    """A warning when the fit's largest W left the driver no core of its own: each worker's
-    own CPU per step (its serving loop, the step's wake-up) then queues for the cores, and
-    ``b`` holds that queueing, which more cores would not have (None: every W had room)."""
+    """A warning when the fit's largest W had more workers than CPUs: each worker's own CPU
+    per step (its serving loop, the step's wake-up) then queues for the cores, and ``b``
+    holds that queueing, which more cores would not have (None: a core per worker; at W =
+    the CPUs only the driver, which mostly waits, shares one)."""
     most = max(run.workers for run in report.runs)
-    if most + 1 <= report.cpus:
+    if most <= report.cpus:
         return None
     text = (
-        f"  W = {most} workers and the driver shared {report.where}'s {report.cpus} CPUs: b holds "
-        "their wait for a core"
+        f"  W = {most} workers shared {report.where}'s {report.cpus} CPUs: b holds their wait "
+        "for a core"
     )
     if report.cores > report.cpus:
         text += (
