@@ -34,10 +34,6 @@ class StepProfile:
     serde: float = 0.0
     compute_sum: float = 0.0
 
-    def add_timer(self, timer: StepTimer) -> None:
-        """One step timed by ``timer`` (all its phases marked)."""
-        self.add(timer.marks, timer.workers)
-
     def add(self, marks: list[float], worker_times: list[tuple[float, float]]) -> None:
         """One step: ``marks`` = perf_counter at its 6 phase boundaries; (serde, compute) each."""
         for name, start, end in zip(PHASES, marks, marks[1:], strict=False):

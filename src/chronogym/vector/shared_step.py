@@ -515,10 +515,10 @@ class SharedServer:
             os.write(self._fanout[2 + g % 2], b"\x01")
         answer = step(v.actions[lo * lay.action_row : hi * lay.action_row], bool(v.timed[0]))
         status, size, message = PLAIN, 0, b""
-        if isinstance(answer, StepAnswer) and answer.timings is not None:
-            v.timings[self.w] = answer.timings
-            answer.timings = None
         if isinstance(answer, StepAnswer):
+            if answer.timings is not None:  # a timed step's: to the block, not the tail slot
+                v.timings[self.w] = answer.timings
+                answer.timings = None
             v.obs[lo * lay.obs_row : hi * lay.obs_row] = np.frombuffer(answer.obs, np.uint8)
             v.rewards[lo:hi] = np.frombuffer(answer.rewards, np.float64)
             v.terminations[lo:hi] = np.frombuffer(answer.terminations, np.bool_)
@@ -528,7 +528,7 @@ class SharedServer:
                 answer.infos = None
             elif isinstance(answer.infos, list):
                 answer.infos = to_columns(answer.infos)
-            extra = answer.infos is not None or answer.restarts or answer.timings
+            extra = answer.infos is not None or answer.restarts
         else:
             extra = True
         if extra:
@@ -549,9 +549,8 @@ class SharedServer:
 
     def _wrote_rows(self, answer: StepAnswer) -> bool:
         """Did the answer's infos go to the info area as rows of one schema (whose text is
-        then in this worker's tail slot)? Not with restarts or timings: those need the
-        tail slot."""
-        if self._rows is None or answer.restarts or answer.timings:
+        then in this worker's tail slot)? Not with restarts: those need the tail slot."""
+        if self._rows is None or answer.restarts:
             return False
         if not isinstance(answer.infos, list):
             return False

@@ -389,15 +389,13 @@ class WorkerVectorEnv(VectorEnv):
         space = self.single_action_space
         array = prepare_box_action(actions, space, self.num_envs, self.invalid_action)  # type: ignore[arg-type]
         array = np.ascontiguousarray(array)
-        if timer is None:
-            answers = self._backend.shared_step(array, self._slices, self._obs_row)  # type: ignore[attr-defined]
-        else:
+        if timer is not None:
             timer.mark()
-            answers = self._backend.shared_step(array, self._slices, self._obs_row, timer)  # type: ignore[attr-defined]
-            if answers is not None:
-                timer.mark()
+        answers = self._backend.shared_step(array, self._slices, self._obs_row, timer)  # type: ignore[attr-defined]
         if answers is None:
             return None
+        if timer is not None:
+            timer.mark()
         if answers.extras:  # infos, restarts, errors: each worker's answer, as over sockets
             workers = list(range(self.num_workers))
             outcomes = [answers.outcome(w, lo, hi) for w, (lo, hi) in enumerate(self._slices)]
@@ -450,7 +448,7 @@ class WorkerVectorEnv(VectorEnv):
             timer = StepTimer()
             if (shared := self._shared_step(actions, timer)) is not None:
                 timer.mark()
-                profile.add_timer(timer)
+                profile.add(timer.marks, timer.workers)
                 return shared
         timer = StepTimer()
         workers = list(range(self.num_workers))
@@ -469,7 +467,7 @@ class WorkerVectorEnv(VectorEnv):
         timer.mark()
         answers = [StepAnswer.of(o.value) for o in outcomes if o.ok]
         timer.workers = [a.timings for a in answers if a.timings is not None]
-        profile.add_timer(timer)
+        profile.add(timer.marks, timer.workers)
         return out
 
     @property
