@@ -241,18 +241,35 @@ def proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def proc_threads(pid: int) -> dict[str, tuple[int, int]]:
+    """Per thread name of process ``pid`` (its first thread named ``"main"``, threads of one
+    name summed): (context switches so far, voluntary and not, CPU ns so far). Each switch is
+    a wake-up of the thread or a preemption. Empty if the process is gone."""
+    threads: dict[str, tuple[int, int]] = {}
+    try:
+        tasks = list(Path(f"/proc/{pid}/task").iterdir())
+    except FileNotFoundError:
+        return threads
+    for task in tasks:
+        try:
+            name = "main" if task.name == str(pid) else (task / "comm").read_text().strip()
+            switches = sum(
+                int(line.split(":")[1])
+                for line in (task / "status").read_text().splitlines()
+                if line.endswith("ctxt_switches", 0, line.find(":"))
+            )
+            cpu_ns = int((task / "schedstat").read_text().split()[0])
+        except (FileNotFoundError, ProcessLookupError):
+            continue  # a thread that ended meanwhile
+        before = threads.get(name, (0, 0))
+        threads[name] = (before[0] + switches, before[1] + cpu_ns)
+    return threads
+
+
 def proc_switches(pid: int) -> int:
     """Context switches (voluntary and not) of every thread of process ``pid`` so far: each is
     a wake-up of one of its threads, or a preemption (0 if the process is gone)."""
-    total = 0
-    try:
-        for task in Path(f"/proc/{pid}/task").iterdir():
-            for line in (task / "status").read_text().splitlines():
-                if line.endswith("ctxt_switches", 0, line.find(":")):
-                    total += int(line.split(":")[1])
-    except FileNotFoundError:
-        return total
-    return total
+    return sum(switches for switches, _ in proc_threads(pid).values())
 
 
 def cpu_percent(pids: list[int], run: Callable[[], Any]) -> dict[str, float]:

@@ -7,6 +7,9 @@ noise falls on all of them:
 
 - ``fork``: ``RayVectorEnv(transport="fork")``, W workers of ``--envs-per-worker`` envs;
 - ``socket``: ``RayVectorEnv`` with Ray workers (its default transport; needs Ray);
+- ``socket_held``: the same, each Ray worker's main thread held by a task from the first
+  round to the end, so that Ray's check for signals, which wakes that thread every 10 ms,
+  stops (the steps are served by another thread); a probe of what those wake-ups cost;
 - ``async``: Gymnasium's ``AsyncVectorEnv``, one process per env;
 - ``sync``: Gymnasium's ``SyncVectorEnv``, every env in the driver.
 
@@ -16,7 +19,9 @@ by round (its median and range: a kind ahead in every round is ahead, whatever t
 After the rounds, with nothing stepping, each kind's *idle wake-ups*: the context switches
 per second of all its workers' threads over ``--idle-s`` (a Ray worker is a whole Ray core
 worker, whose threads keep waking while it waits; on a machine with fewer cores than
-workers each wake-up takes a core from a worker that steps).
+workers each wake-up takes a core from a worker that steps), and, per thread name, the
+wake-ups and CPU per second of one worker (``idle_threads`` in the JSON; ``main``: each
+worker's first thread).
 
     python -m benchmarks.vector.side_by_side --env Ant-v5 --workers 1 4 --kinds fork async
 
@@ -27,8 +32,10 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -43,13 +50,14 @@ from benchmarks.common import (
     positive_int,
     proc_cpu_s,
     proc_switches,
+    proc_threads,
     settings,
     table,
     write_json,
 )
 
 DEFAULT_OUT = RESULTS / "side_by_side.json"
-KINDS = ("fork", "socket", "async", "sync")
+KINDS = ("fork", "socket", "socket_held", "async", "sync")
 ACTION_ROWS = 64
 
 
@@ -82,10 +90,10 @@ def build(
     import gymnasium as gym
     from gymnasium.vector import AutoresetMode
 
-    if kind in ("fork", "socket"):
+    if kind in ("fork", "socket", "socket_held"):
         from chronogym import RayVectorEnv
 
-        transport = {"fork": "fork", "socket": None}[kind]
+        transport = "fork" if kind == "fork" else None
         return RayVectorEnv(
             env_id, num_envs, envs_per_worker=envs_per_worker, transport=transport,
             env_kwargs=env_kwargs,
@@ -106,6 +114,20 @@ def worker_pids(kind: str, vec: Any) -> list[int]:
     return [pid for pid in vec.worker_pids() if pid != os.getpid()]
 
 
+def hold_main_threads(vec: Any, flag: Path) -> list[Any]:
+    """Hold every Ray worker's main thread of ``vec`` with a task that waits until ``flag``
+    exists (checked twice a second); the tasks' refs. The workers' serving threads still
+    step; plain actor calls (``close``) wait until the flag is set."""
+
+    def hold(_worker: Any, path: str) -> None:
+        while not os.path.exists(path):
+            time.sleep(0.5)
+
+    refs = [actor.__ray_call__.remote(hold, str(flag)) for actor in vec._backend.actors]
+    time.sleep(1.0)  # every hold has started (a task queued behind nothing starts at once)
+    return refs
+
+
 def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
     """Every kind at ``workers`` workers, round by round."""
     num_envs = workers * args.envs_per_worker
@@ -113,6 +135,7 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
         k: build(k, args.env, num_envs, args.envs_per_worker, args.env_kwargs) for k in args.kinds
     }
     samples: dict[str, list[tuple[float, float, float]]] = {k: [] for k in vecs}
+    flag, held = Path(tempfile.mkdtemp()) / "release", []
     try:
         rng = np.random.default_rng(0)
         first = next(iter(vecs.values()))
@@ -121,6 +144,9 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
         actions = rng.uniform(low, high, shape).astype(first.single_action_space.dtype)
         for vec in vecs.values():
             vec.reset(seed=0)
+        pids = {k: worker_pids(k, v) for k, v in vecs.items()}  # before any hold: a Ray call
+        if "socket_held" in vecs:
+            held = hold_main_threads(vecs["socket_held"], flag)
         for r in range(args.rounds):
             order = list(vecs) if r % 2 == 0 else list(reversed(vecs))
             for kind in order:
@@ -128,8 +154,14 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
             print(f"  W={workers} round {r + 1}/{args.rounds}: " + ", ".join(
                 f"{k} {samples[k][-1][0]:,.0f} µs" for k in vecs
             ), flush=True)  # fmt: skip
-        wakeups = idle_wakeups({k: worker_pids(k, v) for k, v in vecs.items()}, args.idle_s)
+        wakeups, threads = idle_wakeups(pids, args.idle_s), idle_threads(pids, args.idle_s)
     finally:
+        flag.touch()
+        if held:
+            import ray
+
+            ray.get(held, timeout=30)
+        shutil.rmtree(flag.parent, ignore_errors=True)
         for vec in vecs.values():
             vec.close()
     base = args.kinds[0]
@@ -144,6 +176,7 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
             "wall_over_first": statistics.median(ratios),
             "wall_over_first_range": [min(ratios), max(ratios)],
             "idle_wakeups_per_s": wakeups[kind],
+            "idle_threads": threads[kind],
             "rounds": [list(s) for s in got],
         })  # fmt: skip
     return rows
@@ -158,6 +191,30 @@ def idle_wakeups(pids: dict[str, list[int]], seconds: float) -> dict[str, float]
     before = count()
     time.sleep(seconds)
     return {k: (n - before[k]) / seconds for k, n in count().items()}
+
+
+def idle_threads(
+    pids: dict[str, list[int]], seconds: float
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Per kind and thread name, while nothing steps: one worker's (the mean over the kind's
+    workers) ``wakeups_per_s`` and ``cpu_us_per_s``, busiest first."""
+    before = {pid: proc_threads(pid) for p in pids.values() for pid in p}
+    time.sleep(seconds)
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for kind, kind_pids in pids.items():
+        sums: dict[str, list[float]] = {}
+        for pid in kind_pids:
+            for name, (switches, cpu_ns) in proc_threads(pid).items():
+                was = before[pid].get(name, (0, 0))
+                total = sums.setdefault(name, [0.0, 0.0])
+                total[0] += switches - was[0]
+                total[1] += (cpu_ns - was[1]) / 1e3
+        n = max(len(kind_pids), 1) * seconds
+        ranked = sorted(sums.items(), key=lambda item: -item[1][0])
+        out[kind] = {
+            name: {"wakeups_per_s": s / n, "cpu_us_per_s": c / n} for name, (s, c) in ranked
+        }
+    return out
 
 
 def step_round(
@@ -191,15 +248,27 @@ def main(argv: list[str] | None = None) -> int:
         for r in rows
     ]  # fmt: skip
     print(table([
-        Column("kind", 8, align="<"), Column("W", 4), Column("wall µs", 10, "{:,.0f}"),
+        Column("kind", 12, align="<"), Column("W", 4), Column("wall µs", 10, "{:,.0f}"),
         Column("driver CPU µs", 14, "{:,.0f}"), Column("workers' CPU µs", 16, "{:,.0f}"),
         Column(f"wall / {first}", 12, "{:.3f}"), Column("range", 12),
         Column("idle wake-ups/s", 16, "{:,.0f}"),
     ], cells, rule=True))  # fmt: skip
     record = {**header("side_by_side"), "settings": settings(args), "rows": rows,
               "seconds_in_all": time.perf_counter() - started}  # fmt: skip
+    print_threads(rows)
     write_json(args.out, record)
     return 0
+
+
+def print_threads(rows: list[dict[str, Any]], top: int = 4) -> None:
+    """The threads that woke most in one idle worker of each kind, per W."""
+    for r in rows:
+        busiest = list(r["idle_threads"].items())[:top]
+        if busiest:
+            print(f"  idle, one {r['kind']} worker at W={r['workers']}: " + ", ".join(
+                f"{name} {t['wakeups_per_s']:.0f}/s {t['cpu_us_per_s']:,.0f} µs/s"
+                for name, t in busiest
+            ))  # fmt: skip
 
 
 if __name__ == "__main__":

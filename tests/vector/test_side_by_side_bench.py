@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from benchmarks.vector.side_by_side import idle_wakeups, main, parse_args
+from benchmarks.vector.side_by_side import idle_threads, idle_wakeups, main, parse_args
 
 
 def test_kinds_are_stepped_round_by_round_and_related_to_the_first(tmp_path):
@@ -44,6 +44,40 @@ def test_idle_wakeups_count_a_process_that_keeps_waking():
         sleeper.kill()
         sleeper.wait()
     assert 50 < rate["sleeper"] < 400 and rate["none"] == 0  # ~200 wake-ups per second
+
+
+def test_idle_threads_name_the_thread_that_wakes():
+    code = (
+        "import threading, time\n"
+        "def tick():\n"
+        "    while True: time.sleep(0.005)\n"
+        "threading.Thread(target=tick).start()\n"
+        "time.sleep(60)"
+    )
+    sleeper = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        time.sleep(0.3)
+        threads = idle_threads({"sleeper": [sleeper.pid], "none": []}, 0.5)["sleeper"]
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    busiest, woken = next(iter(threads.items()))  # named as the OS knows it (comm)
+    assert busiest != "main" and 50 < woken["wakeups_per_s"] < 400  # ~200 a second
+    assert woken["cpu_us_per_s"] > 0 and threads["main"]["wakeups_per_s"] < 5
+
+
+def test_held_ray_workers_stop_the_main_threads_wake_ups(ray_cluster, tmp_path):
+    out = tmp_path / "held.json"
+    argv = ["--env", "chronogym/Synthetic-v0", "--env-kwargs", '{"step_ms": 1.0}', "--kinds",
+            "socket", "socket_held", "--rounds", "1", "--steps", "20", "--warmup", "2",
+            "--idle-s", "0.5", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    free, held = json.loads(out.read_text())["rows"]
+    assert held["kind"] == "socket_held" and held["wall_us"] > 900
+    # Ray's signal check wakes a free worker's main thread every 10 ms; the held one's only
+    # wakes for its hold's flag check (twice a second)
+    assert free["idle_threads"]["main"]["wakeups_per_s"] > 50
+    assert held["idle_threads"].get("main", {"wakeups_per_s": 0})["wakeups_per_s"] < 10
 
 
 @pytest.mark.parametrize("seconds", ["0", "-1", "61"])
