@@ -355,42 +355,48 @@ class SharedStep:
         answers = SharedAnswers(
             obs, v.rewards.copy(), v.terminations.copy(), v.truncations.copy(), extras
         )
-        said = np.flatnonzero(v.status[:, 0])
+        status = v.status[:, 0]
+        said = np.flatnonzero(status)
         if not len(said):
             return answers
-        kinds = v.status[said, 0]
-        for w in said[kinds != INFO_ROWS].tolist():
-            if w in extras:
+        if len(said) == len(self.layout.slices) and (status == INFO_ROWS).all():
+            self._take_rows(said.tolist(), answers)  # every worker wrote rows (Ant-v5's)
+            return answers
+        kinds, sizes = v.status.T.tolist()  # Python ints: no NumPy call per worker
+        rows = []
+        for w in said.tolist():
+            if kinds[w] == INFO_ROWS:
+                rows.append(w)
+            elif w in extras:
                 continue
-            status, size = v.status[w]
-            if status == IN_TAIL:
+            elif kinds[w] == IN_TAIL:
                 at = w * self.layout.tail_bytes
-                view = memoryview(v.tails[at : at + size].tobytes())
+                view = memoryview(v.tails[at : at + sizes[w]].tobytes())
                 if decode is not None:
                     extras[w] = decode(w, view)
                     continue
-                head, *sizes = ANSWER.unpack_from(view)
-                extra = answer_extra(sizes, view) if split_infos and head == OK else None
+                head, *parts = ANSWER.unpack_from(view)
+                extra = answer_extra(parts, view) if split_infos and head == OK else None
                 if extra is not None and len(extra) == 2 and extra[1] is None:
                     answers.infos[w] = extra[0]  # its rows are in the block already
                     continue
-                extras[w] = decode_answer(head, sizes, view, extra)
+                extras[w] = decode_answer(head, parts, view, extra)
             else:
                 try:
                     extras[w] = read(w, deadline)
                 except (OSError, EOFError) as error:
                     extras[w] = lost(w, error)
-        if (rows := said[kinds == INFO_ROWS]).size:
+        if rows:
             self._take_rows(rows, answers)
         return answers
 
-    def _take_rows(self, rows: np.ndarray, answers: SharedAnswers) -> None:
+    def _take_rows(self, rows: list[int], answers: SharedAnswers) -> None:
         """The infos that workers ``rows`` wrote to the info area: one vector info when every
         worker wrote rows of one schema (its text the same in every tail slot), else each
         worker's columns, as its tail slot would have held them."""
         v, lay = self.views, self.layout
         workers = len(lay.slices)
-        if rows.size == workers and not answers.extras:
+        if len(rows) == workers and not answers.extras:
             sizes = v.status[:, 1]
             size = int(sizes[0])
             texts = v.tails.reshape(workers, lay.tail_bytes)[:, :size]
@@ -398,7 +404,7 @@ class SharedStep:
                 schema = self._schemas.schema(texts[0].tobytes())
                 answers.rows = (schema, records_in(v.info_rows, schema, lay.num_envs))
                 return
-        for w in rows.tolist():
+        for w in rows:
             if w in answers.extras:
                 continue
             at, (lo, hi) = w * lay.tail_bytes, lay.slices[w]
