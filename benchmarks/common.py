@@ -24,6 +24,7 @@ import datetime
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -321,3 +322,23 @@ def json_object(text: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"{text!r}: expected a JSON object, e.g. '{{}}'")
     return value
+
+
+# -- git revisions ------------------------------------------------------------------------
+
+
+def checkout(rev: str, into: Path) -> Path:
+    """``rev``'s tree in ``into`` (a detached git worktree of this repository); its ``src``
+    folder, for a subprocess's ``PYTHONPATH``."""
+    subprocess.run(
+        ["git", "-C", str(REPO), "worktree", "add", "--detach", str(into), rev],
+        check=True,
+        capture_output=True,
+    )
+    return into / "src"
+
+
+def remove_checkout(into: Path) -> None:
+    """Remove the worktree that :func:`checkout` made in ``into`` (quietly if it is gone)."""
+    remove = ["git", "-C", str(REPO), "worktree", "remove", "--force", str(into)]
+    subprocess.run(remove, capture_output=True)

@@ -21,9 +21,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks.common import RESULTS, header, write_json
+from benchmarks.common import REPO, RESULTS, checkout, header, remove_checkout, write_json
 
-REPO = Path(__file__).resolve().parents[1]
 OUT = RESULTS / "compare_revisions.json"
 
 #: (label, env id, env kwargs, num_envs, backend, vector kwargs)
@@ -86,16 +85,6 @@ print(json.dumps({"rate": rate, "cpu_us": cpu_us, "module": chronogym.__file__})
 """
 
 
-def checkout(rev: str, into: Path) -> Path:
-    """``rev``'s tree in ``into`` (a detached worktree); its ``src`` folder."""
-    subprocess.run(
-        ["git", "-C", str(REPO), "worktree", "add", "--detach", str(into), rev],
-        check=True,
-        capture_output=True,
-    )
-    return into / "src"
-
-
 def measure(src: Path, shape: tuple, seconds: float) -> dict:
     _, env_id, env_kwargs, n, backend, vec_kwargs = shape
     arg = json.dumps([env_id, env_kwargs, n, backend, vec_kwargs, seconds])
@@ -144,18 +133,7 @@ def main(argv: list[str] | None = None) -> None:
                           f"head {rates[shape[0]]['head'][-1]:,.0f}", flush=True)  # fmt: skip
         finally:
             for name in srcs:
-                subprocess.run(
-                    [
-                        "git",
-                        "-C",
-                        str(REPO),
-                        "worktree",
-                        "remove",
-                        "--force",
-                        str(Path(tmp) / name),
-                    ],
-                    capture_output=True,
-                )
+                remove_checkout(Path(tmp) / name)
     rows = []
     print(f"\n{'shape':<32}{'base':>10}{'head':>10}{'head/base':>10}"
           f"{'cpu base':>10}{'cpu head':>10}")  # fmt: skip
