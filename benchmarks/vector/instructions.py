@@ -53,9 +53,11 @@ SHAPES: dict[str, tuple[str, dict[str, Any], int, int]] = {
     "cartpole": ("chronogym/CartPole-v0", {"k": 1}, 2, 8),
     "go1": ("chronogym/Go1Velocity-v0", {}, 2, 8),
     "ant": ("Ant-v5", {}, 4, 1),  # nine scalar infos per step: the info rows
-    # the synthetic env with Ant-v5's nine infos at 1 and 8 workers: the driver's instructions
-    # per further worker, free of the physics
+    # the synthetic env with Ant-v5's nine infos at 1, 2 and 8 workers: the driver's
+    # instructions per further worker, free of the physics (1 to 2 adds what only runs with
+    # more than one worker)
     "synthetic1": ("chronogym/Synthetic-v0", {"step_ms": 0.0, "info_scalars": 9}, 1, 1),
+    "synthetic2": ("chronogym/Synthetic-v0", {"step_ms": 0.0, "info_scalars": 9}, 2, 1),
     "synthetic8": ("chronogym/Synthetic-v0", {"step_ms": 0.0, "info_scalars": 9}, 8, 1),
 }
 
