@@ -267,12 +267,6 @@ def proc_threads(pid: int) -> dict[str, tuple[int, int]]:
     return threads
 
 
-def proc_switches(pid: int) -> int:
-    """Context switches (voluntary and not) of every thread of process ``pid`` so far: each is
-    a wake-up of one of its threads, or a preemption (0 if the process is gone)."""
-    return sum(switches for switches, _ in proc_threads(pid).values())
-
-
 def cpu_percent(pids: list[int], run: Callable[[], Any]) -> dict[str, float]:
     """% of one core the ``pids`` (summed) and this process used while ``run()`` ran."""
     before = [proc_cpu_s(pid) for pid in pids]
@@ -336,6 +330,19 @@ def checkout(rev: str, into: Path) -> Path:
         capture_output=True,
     )
     return into / "src"
+
+
+def revision(rev: str) -> str:
+    """The full commit of git revision ``rev`` of this repository; a ValueError names a
+    revision git does not know."""
+    done = subprocess.run(
+        ["git", "-C", str(REPO), "rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}"],
+        capture_output=True,
+        text=True,
+    )
+    if done.returncode != 0:
+        raise ValueError(f"{rev!r}: not a commit of this repository (git rev-parse)")
+    return done.stdout.strip()
 
 
 def remove_checkout(into: Path) -> None:

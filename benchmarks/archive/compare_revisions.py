@@ -21,7 +21,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks.common import REPO, RESULTS, checkout, header, remove_checkout, write_json
+from benchmarks.common import RESULTS, checkout, header, remove_checkout, revision, write_json
 
 OUT = RESULTS / "compare_revisions.json"
 
@@ -115,11 +115,14 @@ def main(argv: list[str] | None = None) -> None:
     shapes = SHAPE_SETS[args.shapes]
     if args.rounds < 1 or args.seconds <= 0:
         parser.error(f"--rounds={args.rounds} / --seconds={args.seconds}: expected >= 1 / > 0")
-    revs = {name: rev for name, rev in (("base", args.base), ("head", args.head))}
+    try:
+        commits = {name: revision(rev) for name, rev in (("base", args.base), ("head", args.head))}
+    except ValueError as error:
+        parser.error(str(error))
     rates: dict[str, dict[str, list[float]]] = {s[0]: {"base": [], "head": []} for s in shapes}
     cpus: dict[str, dict[str, list[float]]] = {s[0]: {"base": [], "head": []} for s in shapes}
     with tempfile.TemporaryDirectory(prefix="chronogym-revs-") as tmp:
-        srcs = {name: checkout(rev, Path(tmp) / name) for name, rev in revs.items()}
+        srcs = {name: checkout(commit, Path(tmp) / name) for name, commit in commits.items()}
         try:
             for r in range(args.rounds):
                 for shape in shapes:
@@ -153,12 +156,6 @@ def main(argv: list[str] | None = None) -> None:
         )
         print(f"{label:<32}{base:>10,.0f}{head:>10,.0f}{head / base:>10.2f}"
               f"{cpu['base']:>10,.0f}{cpu['head']:>10,.0f}")  # fmt: skip
-    commits = {
-        name: subprocess.run(
-            ["git", "-C", str(REPO), "rev-parse", rev], capture_output=True, text=True
-        ).stdout.strip()
-        for name, rev in revs.items()
-    }
     record = {
         **header("compare_revisions"),
         "revisions": commits,

@@ -36,13 +36,13 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.common import (
-    REPO,
     RESULTS,
     Column,
     checkout,
     header,
     positive_int,
     remove_checkout,
+    revision,
     table,
     write_json,
 )
@@ -124,6 +124,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if len(set(args.shapes)) != len(args.shapes):
         parser.error(f"--shapes {' '.join(args.shapes)}: each shape once")
+    for option in ("base", "head"):
+        if (rev := getattr(args, option)) is not None:
+            try:
+                revision(rev)
+            except ValueError as error:
+                parser.error(f"--{option} {error}")
     return args
 
 
@@ -201,12 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     require_valgrind()
     wanted = {"head": args.head} if args.base is None else {"base": args.base, "head": args.head}
-    commits = {
-        name: subprocess.run(
-            ["git", "-C", str(REPO), "rev-parse", rev], capture_output=True, text=True, check=True
-        ).stdout.strip()
-        for name, rev in wanted.items()
-    }
+    commits = {name: revision(rev) for name, rev in wanted.items()}
     revs = ", ".join(f"{name} {commit[:9]}" for name, commit in commits.items())
     print(f"instructions: {revs}; shapes {' '.join(args.shapes)}; {args.steps} steps counted, "
           f"{args.repeats} runs each")  # fmt: skip
@@ -217,16 +218,14 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             for name in srcs:
                 remove_checkout(Path(tmp) / name)
-    has_base = args.base is not None
     print(table([
         Column("shape", 10, align="<"), Column("revision", 9, align="<"),
         Column("driver / step", 14, "{:,.0f}"), Column("spread", 7, "{:.2%}"),
         Column("/ base", 7, "{:.4f}"), Column("workers / step", 15, "{:,.0f}"),
         Column("spread", 7, "{:.2%}"), Column("/ base", 7, "{:.4f}"),
     ], [
-        (r["shape"], r["revision"], r["driver"], r["driver_spread"],
-         r.get("driver_over_base") if has_base else None, r["workers"], r["workers_spread"],
-         r.get("workers_over_base") if has_base else None)
+        (r["shape"], r["revision"], r["driver"], r["driver_spread"], r.get("driver_over_base"),
+         r["workers"], r["workers_spread"], r.get("workers_over_base"))
         for r in rows
     ], rule=True))  # fmt: skip
     record = {**header("instructions"), "revisions": commits, "settings": {

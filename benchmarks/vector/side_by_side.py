@@ -49,7 +49,6 @@ from benchmarks.common import (
     json_object,
     positive_int,
     proc_cpu_s,
-    proc_switches,
     proc_threads,
     settings,
     table,
@@ -154,7 +153,8 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
             print(f"  W={workers} round {r + 1}/{args.rounds}: " + ", ".join(
                 f"{k} {samples[k][-1][0]:,.0f} µs" for k in vecs
             ), flush=True)  # fmt: skip
-        wakeups, threads = idle_wakeups(pids, args.idle_s), idle_threads(pids, args.idle_s)
+        threads = idle_threads(pids, args.idle_s)  # one idle window: the totals derive
+        wakeups = total_wakeups(threads, pids)
     finally:
         flag.touch()
         if held:
@@ -184,13 +184,17 @@ def measure(args: argparse.Namespace, workers: int) -> list[dict[str, Any]]:
 
 def idle_wakeups(pids: dict[str, list[int]], seconds: float) -> dict[str, float]:
     """Per kind: context switches per second of all its workers' threads while nothing steps."""
+    return total_wakeups(idle_threads(pids, seconds), pids)
 
-    def count() -> dict[str, int]:
-        return {k: sum(proc_switches(pid) for pid in p) for k, p in pids.items()}
 
-    before = count()
-    time.sleep(seconds)
-    return {k: (n - before[k]) / seconds for k, n in count().items()}
+def total_wakeups(
+    threads: dict[str, dict[str, dict[str, float]]], pids: dict[str, list[int]]
+) -> dict[str, float]:
+    """Per kind: all its workers' wake-ups per second, from :func:`idle_threads`' counts."""
+    return {
+        kind: len(pids[kind]) * sum(t["wakeups_per_s"] for t in per_thread.values())
+        for kind, per_thread in threads.items()
+    }
 
 
 def idle_threads(

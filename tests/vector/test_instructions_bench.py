@@ -26,6 +26,13 @@ def test_a_shape_named_twice_is_refused(capsys):
     assert "each shape once" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("option", ["--base", "--head"])
+def test_a_revision_git_does_not_know_is_refused_by_name(option, capsys):
+    with pytest.raises(SystemExit):
+        parse_args([option, "no-such-rev"])
+    assert f"{option} 'no-such-rev': not a commit of this repository" in capsys.readouterr().err
+
+
 @pytest.mark.skipif(
     shutil.which("valgrind") is None or shutil.which("callgrind_control") is None,
     reason="needs Valgrind (valgrind, callgrind_control)",
